@@ -1,0 +1,262 @@
+//! Snapshots: the whole buffer (contents, priorities, counters) as one versioned, checksummed
+//! byte stream, and an atomic file write for restarts.
+//!
+//! Format (version 1, little-endian): magic `RLREPLAY`, u32 version, then u64 obs_dim, act_dim,
+//! capacity, observation rows, f64 α, ε, then u64 head, tail, rows written, evicted early,
+//! sampled, updates applied, updates stale; then the arrays: N f64 priorities, N × act_dim f32
+//! actions, N f32 rewards, N u8 terminated, N u32 next-row positions, M × obs_dim f32 rows; then
+//! a u64 checksum of everything before it. Sizes follow from the header, so a short stream fails
+//! with `UnexpectedEof` and a long one leaves its tail unread.
+//!
+//! Restoring rebuilds the sum tree from the leaves; since every node is a pure function of the
+//! leaves (see `sum_tree`), the restored tree is bit-identical and sampling from it with the same
+//! RNG seed gives the same batches. The sampling mode and β schedule come from the configuration
+//! given at restore and may change; capacity, rows, α and ε shape the stored state and must match.
+
+use std::fs::{self, File};
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+use crate::buffer::ReplayBuffer;
+use crate::checksum::Checksum;
+use crate::config::{Dims, ReplayConfig};
+use crate::error::SnapshotError;
+use crate::storage::Storage;
+use crate::sum_tree::SumTree;
+
+/// First bytes of every snapshot.
+pub const SNAPSHOT_MAGIC: [u8; 8] = *b"RLREPLAY";
+/// The format version this build writes and reads.
+pub const SNAPSHOT_VERSION: u32 = 1;
+
+/// Values per encoded chunk: bounds the staging buffer at 128 KiB for any snapshot size.
+const CHUNK: usize = 16 * 1024;
+
+struct Encoder<'w, W: Write> {
+    w: &'w mut W,
+    sum: Checksum,
+    staging: Vec<u8>,
+}
+
+impl<W: Write> Encoder<'_, W> {
+    fn bytes(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        self.sum.update(bytes);
+        self.w.write_all(bytes)
+    }
+
+    fn u64(&mut self, v: u64) -> std::io::Result<()> {
+        self.bytes(&v.to_le_bytes())
+    }
+
+    fn array<T: Copy, const B: usize>(&mut self, values: &[T], enc: fn(T) -> [u8; B]) -> std::io::Result<()> {
+        let mut staging = std::mem::take(&mut self.staging);
+        for chunk in values.chunks(CHUNK) {
+            staging.clear();
+            chunk.iter().for_each(|&v| staging.extend_from_slice(&enc(v)));
+            self.bytes(&staging)?;
+        }
+        self.staging = staging;
+        Ok(())
+    }
+}
+
+struct Decoder<'r, R: Read> {
+    r: &'r mut R,
+    sum: Checksum,
+    staging: Vec<u8>,
+}
+
+impl<R: Read> Decoder<'_, R> {
+    fn bytes<const B: usize>(&mut self) -> std::io::Result<[u8; B]> {
+        let mut buf = [0; B];
+        self.r.read_exact(&mut buf)?;
+        self.sum.update(&buf);
+        Ok(buf)
+    }
+
+    fn u64(&mut self) -> std::io::Result<u64> {
+        self.bytes().map(u64::from_le_bytes)
+    }
+
+    fn array<T, const B: usize>(&mut self, out: &mut [T], dec: fn([u8; B]) -> T) -> std::io::Result<()> {
+        let mut staging = std::mem::take(&mut self.staging);
+        for chunk in out.chunks_mut(CHUNK) {
+            staging.resize(chunk.len() * B, 0);
+            self.r.read_exact(&mut staging)?;
+            self.sum.update(&staging);
+            for (v, b) in chunk.iter_mut().zip(staging.chunks_exact(B)) {
+                let mut word = [0; B];
+                word.copy_from_slice(b);
+                *v = dec(word);
+            }
+        }
+        self.staging = staging;
+        Ok(())
+    }
+}
+
+impl ReplayBuffer {
+    /// Writes the buffer as a snapshot (see the module doc for the format). Wrap `w` in a
+    /// `BufWriter` if it is unbuffered.
+    pub fn write_snapshot<W: Write>(&self, w: &mut W) -> Result<(), SnapshotError> {
+        let s = &self.storage;
+        let mut e = Encoder { w, sum: Checksum::new(), staging: Vec::new() };
+        e.bytes(&SNAPSHOT_MAGIC)?;
+        e.bytes(&SNAPSHOT_VERSION.to_le_bytes())?;
+        for v in [s.dims.obs_dim as u64, s.dims.act_dim as u64, s.capacity as u64, s.row_capacity as u64] {
+            e.u64(v)?;
+        }
+        e.u64(self.cfg.alpha.to_bits())?;
+        e.u64(self.cfg.epsilon.to_bits())?;
+        for v in [
+            s.head,
+            s.tail,
+            s.rows_written,
+            s.evicted_early,
+            self.sampled_total,
+            self.updates_applied,
+            self.updates_stale,
+        ] {
+            e.u64(v)?;
+        }
+        e.array(&self.tree.leaf_values()[..s.capacity], f64::to_le_bytes)?;
+        e.array(&s.actions, f32::to_le_bytes)?;
+        e.array(&s.rewards, f32::to_le_bytes)?;
+        e.array(&s.terminated, |t| [u8::from(t)])?;
+        e.array(&s.next_rows, u32::to_le_bytes)?;
+        e.array(&s.rows, f32::to_le_bytes)?;
+        let checksum = e.sum.finish();
+        e.w.write_all(&checksum.to_le_bytes())?;
+        e.w.flush()?;
+        Ok(())
+    }
+
+    /// Restores a buffer written by [`write_snapshot`](Self::write_snapshot) for `cfg` and `dims`:
+    /// the same transitions, priorities and counters. Rejects other formats, versions, dimensions
+    /// and state-shaping settings with typed errors, and corrupt data by its checksum.
+    pub fn read_snapshot<R: Read>(r: &mut R, cfg: ReplayConfig, dims: Dims) -> Result<Self, SnapshotError> {
+        cfg.validate(dims)?;
+        let mut d = Decoder { r, sum: Checksum::new(), staging: Vec::new() };
+        if d.bytes()? != SNAPSHOT_MAGIC {
+            return Err(SnapshotError::BadMagic);
+        }
+        let version = u32::from_le_bytes(d.bytes()?);
+        if version != SNAPSHOT_VERSION {
+            return Err(SnapshotError::UnsupportedVersion { found: version, supported: SNAPSHOT_VERSION });
+        }
+        let (obs_dim, act_dim) = (d.u64()?, d.u64()?);
+        if (obs_dim, act_dim) != (dims.obs_dim as u64, dims.act_dim as u64) {
+            let found = Dims { obs_dim: obs_dim as usize, act_dim: act_dim as usize };
+            return Err(SnapshotError::DimsMismatch { expected: dims, found });
+        }
+        let mut storage = Storage::new(cfg.capacity_transitions, cfg.observation_rows_resolved(), dims);
+        expect("capacity_transitions", storage.capacity as u64, d.u64()?)?;
+        expect("observation_rows", storage.row_capacity as u64, d.u64()?)?;
+        let alpha = f64::from_bits(d.u64()?);
+        let epsilon = f64::from_bits(d.u64()?);
+        if alpha.to_bits() != cfg.alpha.to_bits() {
+            return Err(mismatch("alpha", cfg.alpha, alpha));
+        }
+        if epsilon.to_bits() != cfg.epsilon.to_bits() {
+            return Err(mismatch("epsilon", cfg.epsilon, epsilon));
+        }
+        let mut counters = [0u64; 7];
+        for c in &mut counters {
+            *c = d.u64()?;
+        }
+        let [head, tail, rows_written, evicted_early, sampled_total, updates_applied, updates_stale] =
+            counters;
+        let mut priorities = vec![0.0; storage.capacity];
+        d.array(&mut priorities, f64::from_le_bytes)?;
+        d.array(&mut storage.actions, f32::from_le_bytes)?;
+        d.array(&mut storage.rewards, f32::from_le_bytes)?;
+        d.array(&mut storage.terminated, |[b]| b != 0)?;
+        d.array(&mut storage.next_rows, u32::from_le_bytes)?;
+        d.array(&mut storage.rows, f32::from_le_bytes)?;
+        let expected_sum = d.sum.finish();
+        let mut found = [0; 8];
+        d.r.read_exact(&mut found)?;
+        if u64::from_le_bytes(found) != expected_sum {
+            return Err(SnapshotError::ChecksumMismatch);
+        }
+        (storage.head, storage.tail, storage.rows_written, storage.evicted_early) =
+            (head, tail, rows_written, evicted_early);
+        check_invariants(&storage, &priorities)?;
+        let mut tree = SumTree::new(storage.capacity);
+        tree.fill(0, &priorities);
+        let mut buffer = ReplayBuffer::from_parts(cfg, storage, tree);
+        (buffer.sampled_total, buffer.updates_applied, buffer.updates_stale) =
+            (sampled_total, updates_applied, updates_stale);
+        Ok(buffer)
+    }
+
+    /// Writes a snapshot to `path` atomically: to `<path>.tmp` in the same directory, fsync,
+    /// rename over `path`, fsync the directory. A crash leaves either the old or the new snapshot.
+    pub fn write_snapshot_file(&self, path: &Path) -> Result<(), SnapshotError> {
+        let tmp = tmp_path(path);
+        let written = (|| {
+            let mut w = BufWriter::with_capacity(1 << 20, File::create(&tmp)?);
+            self.write_snapshot(&mut w)?;
+            let file = w.into_inner().map_err(|e| e.into_error())?;
+            file.sync_all()?;
+            Ok::<_, SnapshotError>(())
+        })();
+        if let Err(e) = written {
+            // Best effort: a stale temporary file is harmless (the next write truncates it).
+            let _ = fs::remove_file(&tmp);
+            return Err(e);
+        }
+        fs::rename(&tmp, path)?;
+        // The rename itself is durable only once the directory entry is synced (POSIX).
+        #[cfg(unix)]
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            File::open(dir)?.sync_all()?;
+        }
+        Ok(())
+    }
+
+    /// Restores the snapshot at `path` (see [`read_snapshot`](Self::read_snapshot)).
+    pub fn read_snapshot_file(path: &Path, cfg: ReplayConfig, dims: Dims) -> Result<Self, SnapshotError> {
+        let mut r = BufReader::with_capacity(1 << 20, File::open(path)?);
+        Self::read_snapshot(&mut r, cfg, dims)
+    }
+}
+
+fn tmp_path(path: &Path) -> PathBuf {
+    let mut name = path.as_os_str().to_owned();
+    name.push(".tmp");
+    PathBuf::from(name)
+}
+
+fn expect(field: &'static str, expected: u64, found: u64) -> Result<(), SnapshotError> {
+    if expected == found { Ok(()) } else { Err(mismatch(field, expected, found)) }
+}
+
+fn mismatch(field: &'static str, expected: impl ToString, found: impl ToString) -> SnapshotError {
+    SnapshotError::ConfigMismatch { field, expected: expected.to_string(), found: found.to_string() }
+}
+
+/// The checksum catches accidents; these catch a well-formed stream whose contents would break the
+/// buffer (and would otherwise panic on an index later).
+fn check_invariants(s: &Storage, priorities: &[f64]) -> Result<(), SnapshotError> {
+    if s.tail > s.head || s.head - s.tail > s.capacity as u64 {
+        return Err(SnapshotError::Corrupt("live range larger than the ring"));
+    }
+    if s.head > s.tail && s.rows_written < 2 {
+        return Err(SnapshotError::Corrupt("live transitions without observation rows"));
+    }
+    if s.next_rows.iter().any(|&r| r as usize >= s.row_capacity) {
+        return Err(SnapshotError::Corrupt("row position outside the observation rows"));
+    }
+    let consistent = priorities
+        .iter()
+        .enumerate()
+        .all(|(slot, &p)| if s.occupant(slot).is_some() { p.is_finite() && p > 0.0 } else { p == 0.0 });
+    if !consistent {
+        return Err(SnapshotError::Corrupt("priorities disagree with the live transitions"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;
