@@ -1,0 +1,34 @@
+//! `sac-lsp`: the command-line front of the project (rollouts for checking the environments against
+//! other implementations; more subcommands join as the runtime grows).
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+mod csv;
+mod rollout;
+
+/// Distributed SAC-LSP tools.
+#[derive(Debug, Parser)]
+#[command(name = "sac-lsp", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Step a task with actions from a CSV file and write the trajectory as CSV.
+    Rollout(rollout::RolloutArgs),
+}
+
+fn main() -> Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    match Cli::parse().command {
+        Command::Rollout(args) => rollout::run(&args),
+    }
+}

@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# Fetch MuJoCo 3.17.0's shared library from PyPI's `mujoco==3.17.0` wheel into third_party/mujoco/
+# (git-ignored). mujoco-rs links it through MUJOCO_DYNAMIC_LINK_DIR (.cargo/config.toml) and every
+# binary finds it at run time through an rpath (build.rs), so nobody sets LD_LIBRARY_PATH.
+# Idempotent: returns at once when the library is already there.
+set -euo pipefail
+
+MUJOCO_VERSION=3.17.0
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+dest="$root/third_party/mujoco"
+lib="libmujoco.so.$MUJOCO_VERSION"
+
+if [[ -f "$dest/$lib" && -L "$dest/libmujoco.so" ]]; then
+    exit 0
+fi
+
+python=""
+for candidate in python3 python; do
+    if command -v "$candidate" >/dev/null 2>&1 && "$candidate" -m pip --version >/dev/null 2>&1; then
+        python="$candidate"
+        break
+    fi
+done
+if [[ -z "$python" ]]; then
+    echo "setup: MuJoCo $MUJOCO_VERSION comes from PyPI's mujoco==$MUJOCO_VERSION wheel, which needs" >&2
+    echo "setup: python3 with pip; neither 'python3 -m pip' nor 'python -m pip' works here." >&2
+    echo "setup: install pip (Debian: apt-get install python3-pip) and run deploy/setup.sh again." >&2
+    exit 1
+fi
+
+work="$(mktemp -d)"
+trap 'rm -rf "$work"' EXIT
+echo "setup: downloading the mujoco==$MUJOCO_VERSION wheel from PyPI" >&2
+if ! "$python" -m pip download --quiet --no-deps --only-binary=:all: --dest "$work" \
+    "mujoco==$MUJOCO_VERSION" >"$work/pip.log" 2>&1; then
+    cat "$work/pip.log" >&2
+    echo "setup: could not download mujoco==$MUJOCO_VERSION from PyPI (is the package registry reachable?)." >&2
+    exit 1
+fi
+
+mkdir -p "$dest"
+"$python" - "$work" "$dest" "$lib" <<'PY'
+import pathlib, sys, zipfile
+work, dest, lib = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2]), sys.argv[3]
+wheels = sorted(work.glob("mujoco-*.whl"))
+if not wheels:
+    sys.exit(f"setup: no mujoco wheel in {work}")
+with zipfile.ZipFile(wheels[0]) as wheel:
+    member = f"mujoco/{lib}"
+    if member not in wheel.namelist():
+        sys.exit(f"setup: {wheels[0].name} has no {member}")
+    tmp = dest / (lib + ".partial")
+    tmp.write_bytes(wheel.read(member))
+    tmp.chmod(0o755)
+    tmp.rename(dest / lib)
+PY
+ln -sfn "$lib" "$dest/libmujoco.so"
+echo "setup: MuJoCo $MUJOCO_VERSION is in $dest" >&2

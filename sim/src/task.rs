@@ -1,0 +1,52 @@
+use std::fmt;
+use std::str::FromStr;
+
+use crate::{EnvError, Environment, ant_rllab::AntRllab, ant_v5::AntV5, pendulum::InvertedPendulum};
+
+/// The tasks this crate simulates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Task {
+    /// Gymnasium Ant-v5.
+    AntV5,
+    /// The dissertation's rllab Ant.
+    AntRllab,
+    /// Gymnasium InvertedPendulum-v5.
+    InvertedPendulum,
+}
+
+impl Task {
+    /// Every task, in a stable order.
+    pub const ALL: [Task; 3] = [Task::AntV5, Task::AntRllab, Task::InvertedPendulum];
+
+    /// The task's name on the command line and in configs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Task::AntV5 => "ant-v5",
+            Task::AntRllab => "ant-rllab",
+            Task::InvertedPendulum => "inverted-pendulum",
+        }
+    }
+
+    /// Builds a fresh environment whose reset-noise stream starts at `seed`.
+    pub fn make(self, seed: u64) -> Result<Box<dyn Environment>, EnvError> {
+        Ok(match self {
+            Task::AntV5 => Box::new(AntV5::new(seed)?),
+            Task::AntRllab => Box::new(AntRllab::new(seed)?),
+            Task::InvertedPendulum => Box::new(InvertedPendulum::new(seed)?),
+        })
+    }
+}
+
+impl fmt::Display for Task {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Task {
+    type Err = EnvError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Task::ALL.into_iter().find(|t| t.name() == s).ok_or_else(|| EnvError::UnknownTask(s.to_string()))
+    }
+}
