@@ -1,1 +1,22 @@
-//! Placeholder: filled in by its issue.
+//! What every process needs to join a run on the bus: command-line options ([`NodeArgs`]), the zenoh
+//! session scoped to a run id ([`Bus`]), a shutdown signal that tests can trigger ([`Shutdown`]),
+//! tracing set-up ([`telemetry`]) and per-crate TOML config tables ([`config`]).
+//!
+//! A role binary is a thin `main` over its library's `run(cfg, bus, shutdown)`; [`launch`] is that
+//! `main`, written once for all roles.
+#![deny(missing_docs)]
+
+mod args;
+mod bus;
+pub mod config;
+mod error;
+mod launch;
+mod shutdown;
+pub mod telemetry;
+
+pub use args::{BusConfig, NodeArgs, ZenohMode};
+pub use bus::{Bus, decode_payload};
+pub use config::RoleConfig;
+pub use error::NodeError;
+pub use launch::launch;
+pub use shutdown::{Shutdown, ShutdownTrigger};

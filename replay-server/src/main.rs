@@ -1,1 +1,19 @@
-fn main() {}
+//! The `replay-server` binary: `replay_server::run` behind the shared node launcher.
+
+use clap::Parser;
+use node::NodeArgs;
+
+/// Replay server: owns the prioritized replay buffer and serves it over zenoh.
+#[derive(Debug, Parser)]
+#[command(name = "replay-server", version)]
+struct Args {
+    #[command(flatten)]
+    node: NodeArgs,
+}
+
+#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
+async fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
+    node::launch(proto::Role::Replay, &args.node, replay_server::run).await?;
+    Ok(())
+}

@@ -1,0 +1,82 @@
+//! Per-crate configuration tables: one TOML file per run, one table per crate (`[replay_server]`,
+//! `[learner]`, `[agent]`, ...). A missing table means the crate's documented defaults; an unknown key
+//! is an error (the structs use `deny_unknown_fields`), so a typo never silently runs the default.
+
+use std::path::Path;
+
+use serde::de::DeserializeOwned;
+
+use crate::NodeError;
+
+/// A crate's configuration: its table name, defaults, and a check with exact messages.
+pub trait RoleConfig: DeserializeOwned + Default {
+    /// The TOML table this config lives in.
+    const SECTION: &'static str;
+
+    /// Checks every value; the message names the offending key.
+    fn validate(&self) -> Result<(), String>;
+}
+
+/// Loads and validates `T`'s table from `path` (defaults when there is no file or no table).
+pub fn load<T: RoleConfig>(path: Option<&Path>) -> Result<T, NodeError> {
+    let config = match path {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|source| NodeError::ConfigRead { path: path.to_path_buf(), source })?;
+            parse_section(&text, T::SECTION).map_err(|message| NodeError::ConfigParse {
+                path: path.to_path_buf(),
+                section: T::SECTION.to_string(),
+                message,
+            })?
+        }
+        None => T::default(),
+    };
+    config
+        .validate()
+        .map_err(|message| NodeError::ConfigInvalid { section: T::SECTION.to_string(), message })?;
+    Ok(config)
+}
+
+/// Deserializes one table of a TOML document; a missing table gives the defaults.
+pub fn parse_section<T: DeserializeOwned + Default>(text: &str, section: &str) -> Result<T, String> {
+    let mut document: toml::Table = text.parse().map_err(|e: toml::de::Error| e.to_string())?;
+    match document.remove(section) {
+        Some(value) => value.try_into().map_err(|e: toml::de::Error| e.to_string()),
+        None => Ok(T::default()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde::Deserialize;
+
+    #[derive(Debug, Deserialize, PartialEq)]
+    #[serde(default, deny_unknown_fields)]
+    struct Example {
+        batch_size: u32,
+        name: String,
+    }
+
+    impl Default for Example {
+        fn default() -> Self {
+            Self { batch_size: 128, name: "x".into() }
+        }
+    }
+
+    #[test]
+    fn a_table_overrides_defaults_and_a_missing_table_keeps_them() {
+        let text = "[example]\nbatch_size = 64\n[other]\nanything = 1\n";
+        let e: Example = parse_section(text, "example").unwrap();
+        assert_eq!(e, Example { batch_size: 64, name: "x".into() });
+        let d: Example = parse_section(text, "missing").unwrap();
+        assert_eq!(d, Example::default());
+    }
+
+    #[test]
+    fn unknown_keys_and_wrong_types_are_errors() {
+        let err = parse_section::<Example>("[example]\nbatch_sise = 64\n", "example").unwrap_err();
+        assert!(err.contains("batch_sise"), "{err}");
+        assert!(parse_section::<Example>("[example]\nbatch_size = \"a\"\n", "example").is_err());
+    }
+}

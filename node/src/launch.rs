@@ -1,0 +1,32 @@
+//! The `main` of every role binary, written once.
+
+use std::fmt::Debug;
+use std::future::Future;
+
+use anyhow::Context;
+use proto::{NodeId, Role, RunId};
+use tracing::Instrument;
+
+use crate::{Bus, BusConfig, NodeArgs, RoleConfig, Shutdown, config, telemetry};
+
+/// Sets up tracing, loads and validates the role's config table, opens the bus, and runs the role until
+/// SIGINT/SIGTERM; returns the role's error, if any, for `main` to print and exit non-zero.
+pub async fn launch<C, F, Fut, R>(role: Role, args: &NodeArgs, run: F) -> anyhow::Result<R>
+where
+    C: RoleConfig,
+    F: FnOnce(C, Bus, Shutdown) -> Fut,
+    Fut: Future<Output = anyhow::Result<R>>,
+    R: Debug,
+{
+    telemetry::init();
+    let config: C = config::load(args.config.as_deref())?;
+    let run_id = RunId::new(args.run_id.clone())?;
+    let node = NodeId { role, id: args.id };
+    let bus = Bus::open(run_id, node, &BusConfig::from(args))
+        .await
+        .with_context(|| format!("opening the bus for {} {}", role.as_str(), args.id))?;
+    let span = tracing::info_span!("node", role = role.as_str(), id = args.id, run = %args.run_id);
+    let report = run(config, bus, Shutdown::on_signals()).instrument(span).await?;
+    tracing::info!(?report, "stopped");
+    Ok(report)
+}
