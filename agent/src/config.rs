@@ -141,11 +141,8 @@ impl AgentConfig {
         if self.obs_dim == 0 {
             return fail("obs_dim must be at least 1".into());
         }
-        if self.act_dim < 2 {
-            return fail(format!(
-                "act_dim must be at least 2 (coupling layers split it), got {}",
-                self.act_dim
-            ));
+        if self.act_dim < 1 {
+            return fail(format!("act_dim must be at least 1, got {}", self.act_dim));
         }
         for (name, widths, allow_empty) in [
             ("critic_hidden", &self.critic_hidden, false),
@@ -216,7 +213,7 @@ mod tests {
     #[test]
     fn validate_names_the_bad_field() {
         let cases: Vec<(AgentConfig, &str)> = vec![
-            (AgentConfig { act_dim: 1, ..Default::default() }, "act_dim"),
+            (AgentConfig { act_dim: 0, ..Default::default() }, "act_dim"),
             (AgentConfig { obs_dim: 0, ..Default::default() }, "obs_dim"),
             (AgentConfig { critic_hidden: vec![], ..Default::default() }, "critic_hidden"),
             (AgentConfig { embedding_layers: vec![4, 0], ..Default::default() }, "embedding_layers"),

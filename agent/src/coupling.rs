@@ -5,6 +5,10 @@
 //! t([B, c]); the even layer keeps A and maps B' likewise. s and t are separate MLPs on the
 //! concatenation of the kept half and the observation embedding c (tanh hidden, linear output,
 //! Xavier weights, N(0, 1) biases). The scale is raw exp(s): no tanh, no clipping, no regulariser.
+//!
+//! For a 1-d action (D = 1) the first half is empty: the odd layer has nothing to move and is the
+//! identity (no parameters), and the even layer's s and t see only c, i.e. a conditional affine map
+//! of the Gaussian latent. That keeps `InvertedPendulum` (one force) in reach of the same policy.
 
 use candle_core::{Result, Tensor};
 use candle_nn::VarBuilder;
@@ -55,6 +59,12 @@ pub struct Coupling {
     parity: Parity,
     split: usize,
     dim: usize,
+    /// The s and t nets; `None` when the moved half is empty (the layer is the identity).
+    nets: Option<ScaleTranslation>,
+}
+
+#[derive(Clone, Debug)]
+struct ScaleTranslation {
     scale: Mlp,
     translation: Mlp,
 }
@@ -67,6 +77,9 @@ impl Coupling {
             Parity::Odd => (spec.dim - split, split),
             Parity::Even => (split, spec.dim - split),
         };
+        if moved == 0 {
+            return Ok(Self { parity: spec.parity, split, dim: spec.dim, nets: None });
+        }
         let mut layers = spec.hidden.to_vec();
         layers.push(moved);
         let inputs = [("x", kept + spec.context_dim)];
@@ -79,7 +92,12 @@ impl Coupling {
         };
         let scale = Mlp::new(&net, vb.pp("scale"))?;
         let translation = Mlp::new(&net, vb.pp("translation"))?;
-        Ok(Self { parity: spec.parity, split, dim: spec.dim, scale, translation })
+        Ok(Self {
+            parity: spec.parity,
+            split,
+            dim: spec.dim,
+            nets: Some(ScaleTranslation { scale, translation }),
+        })
     }
 
     /// (kept half, moved half) of x.
@@ -93,29 +111,45 @@ impl Coupling {
     }
 
     fn join(&self, kept: &Tensor, moved: &Tensor) -> Result<Tensor> {
+        if kept.dim(1)? == 0 {
+            return Ok(moved.clone());
+        }
         match self.parity {
             Parity::Odd => Tensor::cat(&[moved, kept], 1),
             Parity::Even => Tensor::cat(&[kept, moved], 1),
         }
     }
 
-    fn scale_and_translation(&self, kept: &Tensor, context: &Tensor, grad: Grad) -> Result<(Tensor, Tensor)> {
-        let input = Tensor::cat(&[kept, context], 1)?;
-        Ok((self.scale.forward(&[&input], grad)?, self.translation.forward(&[&input], grad)?))
+    fn scale_and_translation(
+        nets: &ScaleTranslation,
+        kept: &Tensor,
+        context: &Tensor,
+        grad: Grad,
+    ) -> Result<(Tensor, Tensor)> {
+        let input = if kept.dim(1)? == 0 { context.clone() } else { Tensor::cat(&[kept, context], 1)? };
+        Ok((nets.scale.forward(&[&input], grad)?, nets.translation.forward(&[&input], grad)?))
+    }
+
+    /// The identity layer's output (nothing to move): x itself, log|det| = 0.
+    fn identity(x: &Tensor) -> Result<CouplingOutput> {
+        let log_det = Tensor::zeros(x.dim(0)?, x.dtype(), x.device())?;
+        Ok(CouplingOutput { output: x.clone(), log_det })
     }
 
     /// Forward map: moved' = moved * exp(s) + t; log|det| = sum s.
     pub fn forward(&self, x: &Tensor, context: &Tensor, grad: Grad) -> Result<CouplingOutput> {
+        let Some(nets) = &self.nets else { return Self::identity(x) };
         let (kept, moved) = self.halves(x)?;
-        let (s, t) = self.scale_and_translation(&kept, context, grad)?;
+        let (s, t) = Self::scale_and_translation(nets, &kept, context, grad)?;
         let moved = (moved * s.exp()?)?.add(&t)?;
         Ok(CouplingOutput { output: self.join(&kept, &moved)?, log_det: s.sum(1)? })
     }
 
     /// Inverse map: moved = (moved' - t) * exp(-s), s and t from the unchanged half; log|det| = -sum s.
     pub fn inverse(&self, y: &Tensor, context: &Tensor, grad: Grad) -> Result<CouplingOutput> {
+        let Some(nets) = &self.nets else { return Self::identity(y) };
         let (kept, moved) = self.halves(y)?;
-        let (s, t) = self.scale_and_translation(&kept, context, grad)?;
+        let (s, t) = Self::scale_and_translation(nets, &kept, context, grad)?;
         let moved = (moved - t)?.mul(&s.neg()?.exp()?)?;
         Ok(CouplingOutput { output: self.join(&kept, &moved)?, log_det: s.sum(1)?.neg()? })
     }

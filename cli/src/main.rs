@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 mod csv;
 mod rollout;
+mod train;
 
 /// Distributed SAC-LSP tools.
 #[derive(Debug, Parser)]
@@ -19,16 +20,19 @@ struct Cli {
 enum Command {
     /// Step a task with actions from a CSV file and write the trajectory as CSV.
     Rollout(rollout::RolloutArgs),
+    /// Train SAC-LSP on one machine (environment, replay and learner in this process).
+    Train(train::TrainArgs),
 }
 
 fn main() -> Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
         )
         .with_writer(std::io::stderr)
         .init();
     match Cli::parse().command {
         Command::Rollout(args) => rollout::run(&args),
+        Command::Train(args) => train::run(&args),
     }
 }

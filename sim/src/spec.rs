@@ -25,6 +25,17 @@ pub struct EnvSpec {
     pub reward_terms: &'static [&'static str],
 }
 
+impl EnvSpec {
+    /// Maps a squashed policy output in [-1, 1] onto the action box: `centre + u * half_width` per
+    /// component (the identity, exactly, for tasks whose box is [-1, 1]).
+    pub fn action_from_unit(&self, unit: &[f32]) -> Vec<f64> {
+        unit.iter()
+            .zip(self.action_low.iter().zip(&self.action_high))
+            .map(|(u, (lo, hi))| (lo + hi) / 2.0 + f64::from(*u) * (hi - lo) / 2.0)
+            .collect()
+    }
+}
+
 /// Named per-step reward terms (their names are in [`EnvSpec::reward_terms`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RewardTerms {

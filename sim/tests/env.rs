@@ -165,3 +165,14 @@ fn initial_states_of_the_wrong_size_or_not_finite_are_errors() {
     let short = InitState { qpos: vec![0.0; 14], qvel: vec![0.0; 14] };
     assert!(matches!(env.reset_to(&short), Err(EnvError::StateDim { .. })));
 }
+
+#[test]
+fn unit_actions_map_onto_the_action_box() {
+    let ant = make(Task::AntV5).spec().clone();
+    let unit = [0.25f32, -1.0, 1.0, 1e-9, 0.0, 0.5, -0.5, 0.75];
+    let expected: Vec<f64> = unit.iter().map(|u| f64::from(*u)).collect();
+    assert_eq!(ant.action_from_unit(&unit), expected, "identity on [-1, 1]");
+    let pendulum = make(Task::InvertedPendulum).spec().clone();
+    assert_eq!(pendulum.action_from_unit(&[1.0]), vec![3.0]);
+    assert_eq!(pendulum.action_from_unit(&[-0.5]), vec![-1.5]);
+}

@@ -142,3 +142,29 @@ fn deterministic_mode_is_the_forward_map_of_the_given_latent() {
     assert_eq!(a.to_vec2::<f64>().unwrap(), s.actions.to_vec2::<f64>().unwrap());
     assert_eq!(s.actions.to_vec2::<f64>().unwrap(), s.pre_squash.tanh().unwrap().to_vec2::<f64>().unwrap());
 }
+
+#[test]
+fn a_one_dimensional_action_gets_a_conditional_affine_policy_with_exact_log_pi() {
+    let mut rng = StdRng::seed_from_u64(3);
+    let cfg = AgentConfig { act_dim: 1, ..tiny() };
+    let mut cases = 0;
+    for seed in 0..20 {
+        let obs = normal(&mut rng, 3);
+        let z = vec![0.5 * normal(&mut rng, 1)[0]];
+        let (_, policy) = f64_policy(&cfg, seed);
+        let obs_t = tensor(obs.clone(), 1);
+        let sample = policy.sample(&obs_t, &tensor(z.clone(), 1)).unwrap();
+        let y = sample.pre_squash.flatten_all().unwrap().to_vec1::<f64>().unwrap();
+        if y[0].abs() > 2.5 {
+            continue;
+        }
+        let via_inverse = policy.log_prob(&obs_t, &sample.pre_squash).unwrap().to_vec1::<f64>().unwrap()[0];
+        let eps_shift = (1.0 - y[0].tanh().powi(2) + 1e-6).ln() - (1.0 - y[0].tanh().powi(2)).ln();
+        let brute = brute_force_log_pi(&cfg, seed, &obs, &z);
+        assert!((via_inverse + eps_shift - brute).abs() < 1e-6, "{via_inverse} vs brute {brute}");
+        // The even layer really moves the one component (the odd one is the identity).
+        assert!((y[0] - z[0]).abs() > 1e-6);
+        cases += 1;
+    }
+    assert!(cases >= 5, "only {cases} unsaturated cases");
+}

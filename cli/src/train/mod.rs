@@ -1,0 +1,101 @@
+//! `sac-lsp train`: single-machine SAC-LSP (the dissertation's "SAC-LSP" and "Prioritized SAC-LSP"
+//! runs) on any task, with per-epoch metrics and periodic checkpoints.
+
+mod config;
+mod record;
+mod run_config;
+mod trainer;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::Args;
+pub use config::TrainConfig;
+use record::MetricsFile;
+pub use run_config::RunConfig;
+pub use trainer::Trainer;
+
+/// Options of `sac-lsp train` (flags override the run file's `[train]` table).
+#[derive(Debug, Args)]
+pub struct TrainArgs {
+    /// Run file with `[train]`, `[agent]` and `[replay]` tables (see deploy/configs/).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Task (overrides `[train] task`).
+    #[arg(long)]
+    task: Option<String>,
+    /// Seed (overrides `[train] seed`).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Epochs (overrides `[train] epochs`).
+    #[arg(long)]
+    epochs: Option<u64>,
+    /// Stop after the first epoch that ends past this many minutes of wall-clock time.
+    #[arg(long)]
+    minutes: Option<f64>,
+    /// Output folder for metrics.csv and checkpoints (default runs/train-<task>-<unix seconds>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+/// Runs `sac-lsp train`.
+pub fn run(args: &TrainArgs) -> Result<()> {
+    let mut config = RunConfig::load(args.config.as_deref())?;
+    if let Some(task) = &args.task {
+        config.train.task = task.clone();
+    }
+    config.train.seed = args.seed.unwrap_or(config.train.seed);
+    config.train.epochs = args.epochs.unwrap_or(config.train.epochs);
+    let config = config.fitted()?;
+    let out = match &args.out {
+        Some(dir) => dir.clone(),
+        None => {
+            let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH)?.as_secs();
+            PathBuf::from(format!("runs/train-{}-{now}", config.train.task))
+        }
+    };
+    std::fs::create_dir_all(out.join("checkpoints"))
+        .with_context(|| format!("creating {}", out.display()))?;
+    std::fs::write(out.join("config.txt"), format!("{config:#?}\n"))?;
+    let mut metrics = MetricsFile::create(&out.join("metrics.csv"))?;
+    tracing::info!(out = %out.display(), task = %config.train.task, epochs = config.train.epochs, "training");
+
+    let started = Instant::now();
+    let (epochs, checkpoint_every) = (config.train.epochs, config.train.checkpoint_every_epochs);
+    let mut trainer = Trainer::new(config)?;
+    for epoch in 0..epochs {
+        let record = trainer.run_epoch()?;
+        metrics.append(&record)?;
+        tracing::info!(
+            epoch,
+            env_steps = record.env_steps,
+            replay_size = trainer.replay().len(),
+            eval_return = format!("{:.1}", record.eval_return),
+            train_return = format!("{:.1}", record.train_return),
+            updates_per_s = format!("{:.0}", record.updates_per_s),
+            q_loss = format!("{:.3}", record.q_loss),
+            "epoch"
+        );
+        let last =
+            epoch + 1 == epochs || args.minutes.is_some_and(|m| started.elapsed().as_secs_f64() > m * 60.0);
+        if last || (checkpoint_every > 0 && (epoch + 1).is_multiple_of(checkpoint_every)) {
+            write_checkpoint(&out, epoch, &trainer)?;
+        }
+        if last {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// Writes `checkpoints/epoch-<n>.safetensors` atomically (temporary file, then rename).
+fn write_checkpoint(out: &Path, epoch: u64, trainer: &Trainer) -> Result<()> {
+    let checkpoint = trainer.learner().checkpoint()?;
+    let path = out.join("checkpoints").join(format!("epoch-{epoch:05}.safetensors"));
+    let tmp = path.with_extension("partial");
+    std::fs::write(&tmp, &checkpoint.safetensors)?;
+    std::fs::rename(&tmp, &path)?;
+    tracing::info!(path = %path.display(), learner_step = checkpoint.step, "checkpoint");
+    Ok(())
+}

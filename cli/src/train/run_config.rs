@@ -1,0 +1,76 @@
+//! One run file, three tables: `[train]` (the loop), `[agent]` (SAC-LSP), `[replay]` (the buffer).
+//! The distributed roles read the same file, so network shapes cannot drift between processes.
+
+use std::path::Path;
+
+use agent::AgentConfig;
+use anyhow::{Context, Result, bail};
+use replay::{Dims, ReplayConfig};
+
+use super::TrainConfig;
+
+/// Everything a single-machine run needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunConfig {
+    /// The loop.
+    pub train: TrainConfig,
+    /// The agent; `obs_dim` and `act_dim` are taken from the task.
+    pub agent: AgentConfig,
+    /// The replay buffer.
+    pub replay: ReplayConfig,
+}
+
+impl RunConfig {
+    /// Reads the tables of `path` (defaults for missing tables; unknown keys are errors) and fits the
+    /// agent's dimensions to the task.
+    pub fn load(path: Option<&Path>) -> Result<Self> {
+        let text = match path {
+            Some(p) => std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?,
+            None => String::new(),
+        };
+        let config = RunConfig {
+            train: parse_table(&text, path, "train")?,
+            agent: parse_table(&text, path, "agent")?,
+            replay: parse_table(&text, path, "replay")?,
+        };
+        config.fitted()
+    }
+
+    /// Sets the agent's dimensions from the task and validates every table.
+    pub fn fitted(mut self) -> Result<Self> {
+        self.train.validate().map_err(anyhow::Error::msg)?;
+        let task = self.train.task().map_err(anyhow::Error::msg)?;
+        let spec = task.make(0)?.spec().clone();
+        self.agent.obs_dim = spec.obs_dim;
+        self.agent.act_dim = spec.act_dim;
+        self.agent.validate().context("[agent]")?;
+        self.replay.validate(self.dims()).context("[replay]")?;
+        if self.train.min_replay_size > self.replay.capacity_transitions as u64 {
+            bail!(
+                "[train] min_replay_size {} exceeds [replay] capacity_transitions {}: training would never start",
+                self.train.min_replay_size,
+                self.replay.capacity_transitions
+            );
+        }
+        if (self.agent.batch_size as u64) > self.train.min_replay_size.max(1) * 1000 {
+            bail!("[agent] batch_size {} is implausibly large", self.agent.batch_size);
+        }
+        Ok(self)
+    }
+
+    /// The replay's transition dimensions.
+    pub fn dims(&self) -> Dims {
+        Dims { obs_dim: self.agent.obs_dim, act_dim: self.agent.act_dim }
+    }
+}
+
+fn parse_table<T: serde::de::DeserializeOwned + Default>(
+    text: &str,
+    path: Option<&Path>,
+    name: &str,
+) -> Result<T> {
+    node::config::parse_section(text, name).map_err(|e| {
+        let file = path.map(|p| format!("{}: ", p.display())).unwrap_or_default();
+        anyhow::anyhow!("{file}[{name}]: {e}")
+    })
+}

@@ -1,0 +1,284 @@
+//! The single-machine loop (seed-impl §1.4): each env step with the stochastic policy, one update per
+//! step once the replay holds `min_replay_size` transitions, one deterministic evaluation episode per
+//! epoch. Prioritized replay (§2.1) when `[replay] mode = "prioritized"`: new transitions enter at the
+//! maximum priority, and each update sends back |δ| of its batch.
+
+use std::time::Instant;
+
+use agent::{Actor, Batch, Learner, Mode};
+use anyhow::{Context, Result};
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use replay::{ReplayBuffer, SampledBatch, SamplingMode, TransitionBatch};
+use sim::Environment;
+
+use super::record::{EpochRecord, LossMeans};
+use super::run_config::RunConfig;
+
+/// The outcome of one evaluation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Evaluation {
+    /// Mean undiscounted return.
+    pub mean_return: f64,
+    /// Mean episode length.
+    pub mean_length: f64,
+}
+
+/// A single-machine SAC-LSP run: environment, replay, learner and the acting policy.
+pub struct Trainer {
+    config: RunConfig,
+    env: Box<dyn Environment>,
+    eval_env: Box<dyn Environment>,
+    learner: Learner,
+    actor: Actor,
+    replay: ReplayBuffer,
+    rng: StdRng,
+    observation: Vec<f32>,
+    episode_return: f64,
+    env_steps: u64,
+    updates: u64,
+    epoch: u64,
+    sampled: SampledBatch,
+    started: Instant,
+}
+
+impl std::fmt::Debug for Trainer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Trainer").field("epoch", &self.epoch).field("env_steps", &self.env_steps).finish()
+    }
+}
+
+fn to_f32(values: &[f64]) -> Vec<f32> {
+    values.iter().map(|v| *v as f32).collect()
+}
+
+impl Trainer {
+    /// Builds the run. Seeds: networks `seed`, acting noise `seed + 1`, resets `seed + 2` (training)
+    /// and `seed + 3` (evaluation), replay sampling `seed + 4`.
+    pub fn new(config: RunConfig) -> Result<Self> {
+        let seed = config.train.seed;
+        let task = config.train.task().map_err(anyhow::Error::msg)?;
+        let mut env = task.make(seed + 2)?;
+        let eval_env = task.make(seed + 3)?;
+        let learner = Learner::new(config.agent.clone(), seed)?;
+        let mut actor = learner.actor(seed + 1)?;
+        actor.load(&learner.snapshot()?)?;
+        let replay = ReplayBuffer::new(config.replay.clone(), config.dims())?;
+        let observation = to_f32(&env.reset(Some(seed + 2)));
+        Ok(Self {
+            config,
+            env,
+            eval_env,
+            learner,
+            actor,
+            replay,
+            rng: StdRng::seed_from_u64(seed + 4),
+            observation,
+            episode_return: 0.0,
+            env_steps: 0,
+            updates: 0,
+            epoch: 0,
+            sampled: SampledBatch::new(),
+            started: Instant::now(),
+        })
+    }
+
+    /// The learner (for checkpoints and snapshots).
+    pub fn learner(&self) -> &Learner {
+        &self.learner
+    }
+
+    /// The replay buffer (for its counters).
+    pub fn replay(&self) -> &ReplayBuffer {
+        &self.replay
+    }
+
+    /// Runs one epoch of `epoch_length` env steps and its evaluation.
+    pub fn run_epoch(&mut self) -> Result<EpochRecord> {
+        let epoch_start = Instant::now();
+        let (steps_before, updates_before) = (self.env_steps, self.updates);
+        let mut losses = LossMeans::default();
+        let mut finished_returns = Vec::new();
+        for _ in 0..self.config.train.epoch_length {
+            if let Some(episode_return) = self.env_step()? {
+                finished_returns.push(episode_return);
+            }
+            if self.replay.len() as u64 >= self.config.train.min_replay_size {
+                for _ in 0..self.config.train.updates_per_step {
+                    losses.add(&self.update()?);
+                }
+            }
+            if self.env_steps.is_multiple_of(self.config.train.sync_actor_every_steps) {
+                self.actor.load(&self.learner.snapshot()?)?;
+            }
+        }
+        let seconds = epoch_start.elapsed().as_secs_f64();
+        let evaluation = self.evaluate(self.config.train.eval_episodes)?;
+        let mut record = EpochRecord {
+            epoch: self.epoch,
+            env_steps: self.env_steps,
+            updates: self.updates,
+            wall_s: self.started.elapsed().as_secs_f64(),
+            eval_return: evaluation.mean_return,
+            eval_length: evaluation.mean_length,
+            train_return: mean(&finished_returns),
+            updates_per_s: (self.updates - updates_before) as f64 / seconds,
+            env_steps_per_s: (self.env_steps - steps_before) as f64 / seconds,
+            ..EpochRecord::default()
+        };
+        losses.fill(&mut record);
+        self.epoch += 1;
+        Ok(record)
+    }
+
+    /// One env step with the stochastic policy; stores the transition. Returns the episode's return
+    /// when the step ended an episode (terminated or truncated).
+    fn env_step(&mut self) -> Result<Option<f64>> {
+        let act = self.actor.act(&self.observation, Mode::Explore)?;
+        let action = self.env.spec().action_from_unit(&act.env_action);
+        let step = self.env.step(&action)?;
+        let next_observation = to_f32(&step.observation);
+        let reward = step.reward as f32;
+        self.replay
+            .insert_batch(TransitionBatch {
+                observations: &self.observation,
+                actions: &act.action,
+                rewards: &[reward],
+                next_observations: &next_observation,
+                // Only a true termination stops bootstrapping; the time limit does not.
+                terminated: &[step.terminated],
+                abs_td_errors: None,
+            })
+            .context("storing a transition")?;
+        self.env_steps += 1;
+        self.episode_return += step.reward;
+        if step.terminated || step.truncated {
+            let finished = self.episode_return;
+            self.episode_return = 0.0;
+            self.observation = to_f32(&self.env.reset(None));
+            Ok(Some(finished))
+        } else {
+            self.observation = next_observation;
+            Ok(None)
+        }
+    }
+
+    /// One gradient update from a replay batch; prioritized replay gets the batch's new |δ|.
+    fn update(&mut self) -> Result<agent::Metrics> {
+        let batch_size = self.config.agent.batch_size;
+        self.replay.sample(batch_size, self.updates, &mut self.rng, &mut self.sampled)?;
+        let prioritized = self.config.replay.mode == SamplingMode::Prioritized;
+        let s = &self.sampled;
+        let batch = Batch {
+            size: batch_size,
+            observations: s.observations.clone(),
+            actions: s.actions.clone(),
+            rewards: s.rewards.clone(),
+            next_observations: s.next_observations.clone(),
+            terminated: s.terminated.iter().map(|&d| if d { 1.0 } else { 0.0 }).collect(),
+            is_weights: prioritized.then(|| s.is_weights.clone()),
+        };
+        let out = self.learner.update(&batch)?;
+        if prioritized {
+            let abs_td: Vec<f32> = out.td_errors.iter().map(|d| d.abs()).collect();
+            self.replay.update_priorities(&s.slots, &s.generations, &abs_td)?;
+        }
+        self.updates += 1;
+        Ok(out.metrics)
+    }
+
+    /// Runs `episodes` episodes in deterministic mode on the evaluation env. As the paper's
+    /// `deterministic()` context, one latent is drawn per evaluation and held for all its episodes.
+    pub fn evaluate(&mut self, episodes: u32) -> Result<Evaluation> {
+        self.actor.load(&self.learner.snapshot()?)?;
+        self.actor.redraw_fixed_latent();
+        let (mut returns, mut lengths) = (Vec::new(), Vec::new());
+        for _ in 0..episodes {
+            let mut observation = to_f32(&self.eval_env.reset(None));
+            let (mut total, mut length) = (0.0, 0u32);
+            loop {
+                let act = self.actor.act(&observation, Mode::Deterministic)?;
+                let step = self.eval_env.step(&self.eval_env.spec().action_from_unit(&act.env_action))?;
+                total += step.reward;
+                length += 1;
+                if step.terminated || step.truncated {
+                    break;
+                }
+                observation = to_f32(&step.observation);
+            }
+            returns.push(total);
+            lengths.push(f64::from(length));
+        }
+        Ok(Evaluation { mean_return: mean(&returns), mean_length: mean(&lengths) })
+    }
+}
+
+fn mean(values: &[f64]) -> f64 {
+    if values.is_empty() { f64::NAN } else { values.iter().sum::<f64>() / values.len() as f64 }
+}
+
+#[cfg(test)]
+mod tests {
+    use agent::{AgentConfig, Learner};
+    use replay::{ReplayConfig, SamplingMode};
+
+    use super::*;
+    use crate::train::TrainConfig;
+
+    fn tiny(mode: SamplingMode) -> RunConfig {
+        RunConfig {
+            train: TrainConfig {
+                task: "inverted-pendulum".into(),
+                epochs: 2,
+                epoch_length: 300,
+                min_replay_size: 100,
+                ..TrainConfig::default()
+            },
+            agent: AgentConfig {
+                critic_hidden: vec![16],
+                embedding_layers: vec![16, 4],
+                batch_size: 16,
+                ..AgentConfig::default()
+            },
+            replay: ReplayConfig { capacity_transitions: 1000, mode, ..ReplayConfig::default() },
+        }
+        .fitted()
+        .unwrap()
+    }
+
+    #[test]
+    fn epochs_step_update_and_evaluate_on_the_real_simulator() {
+        let config = tiny(SamplingMode::Uniform);
+        let mut trainer = Trainer::new(config.clone()).unwrap();
+        let first = trainer.run_epoch().unwrap();
+        let second = trainer.run_epoch().unwrap();
+        assert_eq!((first.env_steps, second.env_steps), (300, 600));
+        // Updates start once 100 transitions are stored: one per step from step 100 on.
+        assert_eq!((first.updates, second.updates), (201, 501));
+        assert_eq!(trainer.replay().len(), 600);
+        assert!(second.eval_return >= 1.0 && second.eval_length >= 1.0);
+        assert!(second.q_loss.is_finite() && second.v_loss.is_finite() && second.policy_loss.is_finite());
+        assert!(first.train_return.is_finite(), "random pendulum episodes end within an epoch");
+        let checkpoint = trainer.learner().checkpoint().unwrap();
+        let restored = Learner::from_checkpoint(config.agent.clone(), &checkpoint).unwrap();
+        assert_eq!(restored.step(), 501);
+    }
+
+    #[test]
+    fn prioritized_runs_send_priorities_back() {
+        let mut trainer = Trainer::new(tiny(SamplingMode::Prioritized)).unwrap();
+        trainer.run_epoch().unwrap();
+        let counters = trainer.replay().counters();
+        assert_eq!(counters.updates_applied, 201 * 16);
+        assert!(
+            trainer.replay().priority_stats().unwrap().max > trainer.replay().priority_stats().unwrap().min
+        );
+    }
+
+    #[test]
+    fn min_replay_size_above_capacity_is_refused() {
+        let mut config = tiny(SamplingMode::Uniform);
+        config.train.min_replay_size = 5000;
+        assert!(config.fitted().unwrap_err().to_string().contains("never start"));
+    }
+}
