@@ -18,7 +18,8 @@ fn actions(n: usize) -> Vec<[f64; 8]> {
 
 /// Steps/s of `mj_step` × 5 with the given controls.
 fn raw_physics(actions: &[[f64; 8]]) -> f64 {
-    let mut physics = Physics::load("ant-v5", &ant_mjcf(AntVariant::V5).expect("bench set-up")).expect("bench set-up");
+    let mut physics =
+        Physics::load("ant-v5", &ant_mjcf(AntVariant::V5).expect("bench set-up")).expect("bench set-up");
     let start = InitState { qpos: physics.qpos0(), qvel: vec![0.0; physics.nv()] };
     physics.reset_to(&start).expect("bench set-up");
     let t = Instant::now();

@@ -4,7 +4,8 @@
 use mujoco_rs::prelude::MjtObjBase;
 
 use crate::ant_model::{AntVariant, ant_mjcf};
-use crate::physics::{NoiseStream, Physics};
+use crate::episode::Episode;
+use crate::physics::Physics;
 use crate::{EnvError, EnvSpec, Environment, InitState, RewardTerms, Step, check_action, numpy};
 
 /// rllab's `normalize()` maps [-1, 1] onto the motors' ±150 range.
@@ -28,10 +29,7 @@ pub const REWARD_TERMS: &[&str] =
 /// subtree centre of mass), actions in [-1, 1] scaled to ±150 and clipped.
 #[derive(Debug)]
 pub struct AntRllab {
-    physics: Physics,
-    spec: EnvSpec,
-    noise: NoiseStream,
-    elapsed_steps: u32,
+    episode: Episode,
 }
 
 impl AntRllab {
@@ -50,16 +48,16 @@ impl AntRllab {
             nv: physics.nv(),
             reward_terms: REWARD_TERMS,
         };
-        Ok(Self { physics, spec, noise: NoiseStream::new(seed), elapsed_steps: 0 })
+        Ok(Self { episode: Episode::new(physics, spec, seed) })
     }
 
     fn clipped_contact_forces(&self) -> impl Iterator<Item = f64> + '_ {
-        self.physics.data().cfrc_ext().iter().flatten().map(|f| f.clamp(-1.0, 1.0))
+        self.episode.physics.data().cfrc_ext().iter().flatten().map(|f| f.clamp(-1.0, 1.0))
     }
 
     fn observation(&self) -> Vec<f64> {
-        let data = self.physics.data();
-        let mut obs = Vec::with_capacity(self.spec.obs_dim);
+        let data = self.episode.physics.data();
+        let mut obs = Vec::with_capacity(self.episode.spec.obs_dim);
         obs.extend_from_slice(data.qpos());
         obs.extend_from_slice(data.qvel());
         obs.extend(self.clipped_contact_forces());
@@ -71,8 +69,8 @@ impl AntRllab {
     /// rllab's `get_body_comvel("torso")`: the mass-weighted mean linear velocity of the torso's
     /// subtree (every body but the world), each from `mj_objectVelocity` in world coordinates.
     fn torso_subtree_x_velocity(&self) -> f64 {
-        let data = self.physics.data();
-        let masses = self.physics.model().body_mass();
+        let data = self.episode.physics.data();
+        let masses = self.episode.physics.model().body_mass();
         let (mut momentum, mut mass) = (0.0, 0.0);
         for (body, m) in masses.iter().enumerate().skip(TORSO) {
             let velocity = data.object_velocity(MjtObjBase::mjOBJ_BODY, body, false);
@@ -85,45 +83,45 @@ impl AntRllab {
 
 impl Environment for AntRllab {
     fn spec(&self) -> &EnvSpec {
-        &self.spec
+        &self.episode.spec
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
-        self.noise.reseed(seed);
-        let qpos = self.noise.normal_around(&INIT_QPOS, QPOS_NOISE);
-        let qvel = self.noise.normal_around(&vec![0.0; self.spec.nv], QVEL_NOISE);
-        self.reset_to(&InitState { qpos, qvel }).unwrap_or_else(|_| unreachable!("dims come from the model"))
+        self.episode.noisy_restart(seed, |noise, physics| InitState {
+            qpos: noise.normal_around(&INIT_QPOS, QPOS_NOISE),
+            qvel: noise.normal_around(&vec![0.0; physics.nv()], QVEL_NOISE),
+        });
+        self.observation()
     }
 
     fn reset_to(&mut self, state: &InitState) -> Result<Vec<f64>, EnvError> {
-        self.physics.reset_to(state)?;
-        self.elapsed_steps = 0;
+        self.episode.restart(state)?;
         Ok(self.observation())
     }
 
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
-        check_action(&self.spec, action)?;
+        check_action(&self.episode.spec, action)?;
         // normalize(): lb + (a + 1)(ub - lb)/2, clipped to [lb, ub]; the costs see the clipped action.
         let unit: Vec<f64> = action.iter().map(|a| a.clamp(-1.0, 1.0)).collect();
         let ctrl: Vec<f64> = unit.iter().map(|a| a * ACTION_SCALE).collect();
-        self.physics.step(&ctrl, 1);
+        self.episode.physics.step(&ctrl, 1);
         // rllab calls forward() after stepping; MuJoCo >= 2 also needs rnePostConstraint for cfrc_ext.
-        self.physics.forward();
-        self.physics.rne_post_constraint();
+        self.episode.physics.forward();
+        self.episode.physics.rne_post_constraint();
 
         let x_velocity = self.torso_subtree_x_velocity();
         let ctrl_cost = CTRL_COST_WEIGHT * numpy::sum_of_squares(unit.iter().copied());
         let contact_cost = CONTACT_COST_WEIGHT * numpy::sum_of_squares(self.clipped_contact_forces());
         let reward = x_velocity - ctrl_cost - contact_cost + SURVIVE_REWARD;
-        let z = self.physics.data().qpos()[2];
-        let alive = self.physics.state_is_finite() && (HEALTHY_Z.0..=HEALTHY_Z.1).contains(&z);
+        let z = self.episode.physics.data().qpos()[2];
+        let alive = self.episode.physics.state_is_finite() && (HEALTHY_Z.0..=HEALTHY_Z.1).contains(&z);
 
-        self.elapsed_steps += 1;
+        let truncated = self.episode.tick();
         Ok(Step {
             observation: self.observation(),
             reward,
             terminated: !alive,
-            truncated: self.elapsed_steps >= self.spec.max_episode_steps,
+            truncated,
             terms: RewardTerms::new(&[x_velocity, x_velocity, -ctrl_cost, -contact_cost, SURVIVE_REWARD]),
         })
     }

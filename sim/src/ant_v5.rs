@@ -1,7 +1,8 @@
 //! Gymnasium Ant-v5, reproduced call for call (`gymnasium/envs/mujoco/ant_v5.py` with its defaults).
 
 use crate::ant_model::{AntVariant, ant_mjcf};
-use crate::physics::{NoiseStream, Physics};
+use crate::episode::Episode;
+use crate::physics::Physics;
 use crate::{EnvError, EnvSpec, Environment, InitState, RewardTerms, Step, check_action, numpy};
 
 const FRAME_SKIP: usize = 5;
@@ -22,10 +23,7 @@ pub const REWARD_TERMS: &[&str] =
 /// Gymnasium Ant-v5: 105-d observation (qpos[2:], qvel, clipped cfrc_ext of bodies 1..13), 8 torques.
 #[derive(Debug)]
 pub struct AntV5 {
-    physics: Physics,
-    spec: EnvSpec,
-    noise: NoiseStream,
-    elapsed_steps: u32,
+    episode: Episode,
 }
 
 impl AntV5 {
@@ -44,17 +42,17 @@ impl AntV5 {
             nv: physics.nv(),
             reward_terms: REWARD_TERMS,
         };
-        Ok(Self { physics, spec, noise: NoiseStream::new(seed), elapsed_steps: 0 })
+        Ok(Self { episode: Episode::new(physics, spec, seed) })
     }
 
     fn clipped_contact_forces(&self) -> impl Iterator<Item = f64> + '_ {
         let (lo, hi) = CONTACT_FORCE_RANGE;
-        self.physics.data().cfrc_ext().iter().flatten().map(move |f| f.clamp(lo, hi))
+        self.episode.physics.data().cfrc_ext().iter().flatten().map(move |f| f.clamp(lo, hi))
     }
 
     fn observation(&self) -> Vec<f64> {
-        let data = self.physics.data();
-        let mut obs = Vec::with_capacity(self.spec.obs_dim);
+        let data = self.episode.physics.data();
+        let mut obs = Vec::with_capacity(self.episode.spec.obs_dim);
         obs.extend_from_slice(&data.qpos()[2..]);
         obs.extend_from_slice(data.qvel());
         // Row 0 is the world body, always zero: Ant-v5 leaves it out of the observation.
@@ -63,44 +61,43 @@ impl AntV5 {
     }
 
     fn is_healthy(&self) -> bool {
-        let z = self.physics.data().qpos()[2];
-        self.physics.state_is_finite() && HEALTHY_Z.0 <= z && z <= HEALTHY_Z.1
+        let z = self.episode.physics.data().qpos()[2];
+        self.episode.physics.state_is_finite() && HEALTHY_Z.0 <= z && z <= HEALTHY_Z.1
     }
 
     fn torso_xy(&self) -> [f64; 2] {
         // xpos, not qpos: after mj_step it still holds the last internal forward evaluation, and that
         // is what Gymnasium differentiates.
-        let p = self.physics.data().xpos()[TORSO];
+        let p = self.episode.physics.data().xpos()[TORSO];
         [p[0], p[1]]
     }
 }
 
 impl Environment for AntV5 {
     fn spec(&self) -> &EnvSpec {
-        &self.spec
+        &self.episode.spec
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
-        self.noise.reseed(seed);
-        let qpos0 = self.physics.qpos0();
-        let qpos = self.noise.uniform_around(&qpos0, RESET_NOISE_SCALE);
-        let qvel = self.noise.normal_around(&vec![0.0; self.spec.nv], RESET_NOISE_SCALE);
-        self.reset_to(&InitState { qpos, qvel }).unwrap_or_else(|_| unreachable!("dims come from the model"))
+        self.episode.noisy_restart(seed, |noise, physics| InitState {
+            qpos: noise.uniform_around(&physics.qpos0(), RESET_NOISE_SCALE),
+            qvel: noise.normal_around(&vec![0.0; physics.nv()], RESET_NOISE_SCALE),
+        });
+        self.observation()
     }
 
     fn reset_to(&mut self, state: &InitState) -> Result<Vec<f64>, EnvError> {
-        self.physics.reset_to(state)?;
-        self.elapsed_steps = 0;
+        self.episode.restart(state)?;
         Ok(self.observation())
     }
 
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
-        check_action(&self.spec, action)?;
+        check_action(&self.episode.spec, action)?;
         let xy_before = self.torso_xy();
-        self.physics.step(action, FRAME_SKIP);
-        self.physics.rne_post_constraint();
+        self.episode.physics.step(action, FRAME_SKIP);
+        self.episode.physics.rne_post_constraint();
         let xy_after = self.torso_xy();
-        let x_velocity = (xy_after[0] - xy_before[0]) / self.spec.dt;
+        let x_velocity = (xy_after[0] - xy_before[0]) / self.episode.spec.dt;
 
         let healthy = self.is_healthy();
         let forward_reward = x_velocity * FORWARD_REWARD_WEIGHT;
@@ -110,12 +107,12 @@ impl Environment for AntV5 {
         let contact_cost = CONTACT_COST_WEIGHT * numpy::sum_of_squares(self.clipped_contact_forces());
         let reward = (forward_reward + healthy_reward) - (ctrl_cost + contact_cost);
 
-        self.elapsed_steps += 1;
+        let truncated = self.episode.tick();
         Ok(Step {
             observation: self.observation(),
             reward,
             terminated: !healthy,
-            truncated: self.elapsed_steps >= self.spec.max_episode_steps,
+            truncated,
             terms: RewardTerms::new(&[x_velocity, forward_reward, -ctrl_cost, -contact_cost, healthy_reward]),
         })
     }

@@ -18,6 +18,7 @@
 pub mod ant_model;
 pub mod ant_rllab;
 pub mod ant_v5;
+mod episode;
 mod error;
 mod numpy;
 pub mod pendulum;

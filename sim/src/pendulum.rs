@@ -2,7 +2,8 @@
 //! pole must stay within 0.2 rad of upright; +1 per step while it does. Small and fast, for learning
 //! checks (a good agent reaches the maximum return of 1000 within ~20K steps).
 
-use crate::physics::{NoiseStream, Physics};
+use crate::episode::Episode;
+use crate::physics::Physics;
 use crate::{EnvError, EnvSpec, Environment, InitState, RewardTerms, Step, check_action};
 
 /// The pendulum MJCF.
@@ -19,10 +20,7 @@ pub const REWARD_TERMS: &[&str] = &["reward_survive"];
 /// InvertedPendulum-v5: observation (cart x, pole angle, their velocities), one force in [-3, 3].
 #[derive(Debug)]
 pub struct InvertedPendulum {
-    physics: Physics,
-    spec: EnvSpec,
-    noise: NoiseStream,
-    elapsed_steps: u32,
+    episode: Episode,
 }
 
 impl InvertedPendulum {
@@ -41,46 +39,40 @@ impl InvertedPendulum {
             nv: physics.nv(),
             reward_terms: REWARD_TERMS,
         };
-        Ok(Self { physics, spec, noise: NoiseStream::new(seed), elapsed_steps: 0 })
+        Ok(Self { episode: Episode::new(physics, spec, seed) })
     }
 
     fn observation(&self) -> Vec<f64> {
-        let data = self.physics.data();
+        let data = self.episode.physics.data();
         data.qpos().iter().chain(data.qvel()).copied().collect()
     }
 }
 
 impl Environment for InvertedPendulum {
     fn spec(&self) -> &EnvSpec {
-        &self.spec
+        &self.episode.spec
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
-        self.noise.reseed(seed);
-        let qpos = self.noise.uniform_around(&self.physics.qpos0(), RESET_NOISE_SCALE);
-        let qvel = self.noise.uniform_around(&vec![0.0; self.spec.nv], RESET_NOISE_SCALE);
-        self.reset_to(&InitState { qpos, qvel }).unwrap_or_else(|_| unreachable!("dims come from the model"))
+        self.episode.noisy_restart(seed, |noise, physics| InitState {
+            qpos: noise.uniform_around(&physics.qpos0(), RESET_NOISE_SCALE),
+            qvel: noise.uniform_around(&vec![0.0; physics.nv()], RESET_NOISE_SCALE),
+        });
+        self.observation()
     }
 
     fn reset_to(&mut self, state: &InitState) -> Result<Vec<f64>, EnvError> {
-        self.physics.reset_to(state)?;
-        self.elapsed_steps = 0;
+        self.episode.restart(state)?;
         Ok(self.observation())
     }
 
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
-        check_action(&self.spec, action)?;
-        self.physics.step(action, FRAME_SKIP);
+        check_action(&self.episode.spec, action)?;
+        self.episode.physics.step(action, FRAME_SKIP);
         let observation = self.observation();
         let terminated = !observation.iter().all(|v| v.is_finite()) || observation[1].abs() > MAX_ANGLE;
         let reward = if terminated { 0.0 } else { 1.0 };
-        self.elapsed_steps += 1;
-        Ok(Step {
-            observation,
-            reward,
-            terminated,
-            truncated: self.elapsed_steps >= self.spec.max_episode_steps,
-            terms: RewardTerms::new(&[reward]),
-        })
+        let truncated = self.episode.tick();
+        Ok(Step { observation, reward, terminated, truncated, terms: RewardTerms::new(&[reward]) })
     }
 }

@@ -34,7 +34,8 @@ fn replay(task: Task, fixture: &str) {
     for (name, column) in spec.reward_terms.iter().zip(&header[1 + spec.obs_dim + 3..]) {
         assert_eq!(name, column);
     }
-    let first = env.reset_to(&InitState::from_row(&init, spec.nq, spec.nv).expect("a valid state")).expect("reset");
+    let first =
+        env.reset_to(&InitState::from_row(&init, spec.nq, spec.nv).expect("a valid state")).expect("reset");
     let mut worst = 0.0f64;
     let mut check = |t: usize, got: &[f64], want: &[f64]| {
         for (i, (g, w)) in got.iter().zip(want).enumerate() {
