@@ -1,13 +1,28 @@
-//! Learner updates per second at batch 128 and batch-1 action latency, Ant-sized networks
-//! (paper defaults; obs 105 = Ant-v5, obs 125 = rllab Ant; act 8). Plain `Instant` timing.
+//! Learner updates per second at batch 128, candle vs fused, and batch-1 action latency, Ant-sized
+//! networks (paper defaults; obs 105 = Ant-v5, obs 125 = rllab Ant; act 8). Plain `Instant` timing.
 //!
 //! `RAYON_NUM_THREADS=1 cargo bench -p agent --bench update`; `-- --test` runs a quick smoke pass.
+//! The fused learner runs with its default vectorised tanh and, for comparison, with libm's
+//! (`with_exact_tanh`, bit-identical to candle). `RAYON_NUM_THREADS=2` runs both learners' GEMMs
+//! on two threads. No fused batch-1 forward exists: the action latency is the candle `Actor`'s,
+//! which executors use.
+//!
+//! FLOPs are counted from the layer shapes, 2 FLOP per multiply-add:
+//! * nominal (PyTorch-style, as `shared/reference/stack.md` counts): every layer evaluation the
+//!   candle update runs costs 2 per MAC forward, and each one on the differentiated path another
+//!   4 per MAC backward (weight and input gradients);
+//! * executed: the GEMMs the fused update actually runs (shared observation product, no input
+//!   gradients of first layers, no Q backward for the policy, the last coupling layer's nets reused
+//!   by the inverse pass).
 
 use std::time::Instant;
 
-use agent::{AgentConfig, Batch, Learner, Mode};
+use agent::{AgentConfig, Batch, FusedLearner, Learner, Mode};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use rand_distr::StandardNormal;
+
+/// One core's peak, for the fraction printed (AVX-512 FMA at this machine's clock).
+const PEAK_GFLOPS: f64 = 96.0;
 
 fn batch(cfg: &AgentConfig, size: usize, rng: &mut StdRng) -> Batch {
     let mut draw = |n: usize| -> Vec<f32> { (0..n).map(|_| rng.sample(StandardNormal)).collect() };
@@ -22,73 +37,169 @@ fn batch(cfg: &AgentConfig, size: usize, rng: &mut StdRng) -> Batch {
     }
 }
 
-/// (min, median, max) of `runs` windows, each `per_window` calls of `f`, in calls per second.
-fn rate(runs: usize, per_window: usize, mut f: impl FnMut()) -> (f64, f64, f64) {
-    let mut rates: Vec<f64> = (0..runs)
-        .map(|_| {
-            let start = Instant::now();
-            for _ in 0..per_window {
-                f();
-            }
-            per_window as f64 / start.elapsed().as_secs_f64()
+/// Nanoseconds this thread has spent on a CPU (`/proc/thread-self/schedstat`), if readable: the
+/// machine is shared, so rates are also given per on-CPU second, which time spent descheduled
+/// does not dilute.
+fn thread_cpu_ns() -> Option<u64> {
+    std::fs::read_to_string("/proc/thread-self/schedstat").ok()?.split_whitespace().next()?.parse().ok()
+}
+
+/// Calls per second over `runs` windows of `per_window` calls of `f`.
+#[derive(Clone, Copy, Debug)]
+struct Rates {
+    /// (min, median, max) by wall-clock time.
+    wall: (f64, f64, f64),
+    /// Median by this thread's on-CPU time.
+    on_cpu: Option<f64>,
+}
+
+fn rate(runs: usize, per_window: usize, mut f: impl FnMut()) -> Rates {
+    let (mut wall, mut on_cpu) = (Vec::new(), Vec::new());
+    for _ in 0..runs {
+        let (start, cpu_start) = (Instant::now(), thread_cpu_ns());
+        for _ in 0..per_window {
+            f();
+        }
+        wall.push(per_window as f64 / start.elapsed().as_secs_f64());
+        if let (Some(a), Some(b)) = (cpu_start, thread_cpu_ns()) {
+            on_cpu.push(per_window as f64 / ((b - a) as f64 * 1e-9));
+        }
+    }
+    wall.sort_by(f64::total_cmp);
+    on_cpu.sort_by(f64::total_cmp);
+    Rates { wall: (wall[0], wall[runs / 2], wall[runs - 1]), on_cpu: on_cpu.get(on_cpu.len() / 2).copied() }
+}
+
+/// Multiply-adds per row of an MLP on `fan_in` inputs: (all layers, all but the first).
+fn mlp_macs(fan_in: usize, layers: &[usize]) -> (usize, usize) {
+    let mut prev = fan_in;
+    let mut all = 0;
+    let mut first = 0;
+    for (k, &w) in layers.iter().enumerate() {
+        all += prev * w;
+        if k == 0 {
+            first = prev * w;
+        }
+        prev = w;
+    }
+    (all, all - first)
+}
+
+/// (nominal, executed) FLOPs of one update of the paper configuration (see the module doc).
+fn flops(cfg: &AgentConfig, rows: usize) -> (f64, f64) {
+    let (o, d) = (cfg.obs_dim, cfg.act_dim);
+    let mut critic = cfg.critic_hidden.clone();
+    critic.push(1);
+    let (v_all, v_rest) = mlp_macs(o, &critic);
+    let (q_all, q_rest) = mlp_macs(o + d, &critic);
+    let (e_all, e_rest) = mlp_macs(o, &cfg.embedding_layers);
+    let context = cfg.embedding_layers.last().copied().unwrap_or(0);
+    // Both nets (s and t) of each coupling layer; odd layers move the first half.
+    let per_layer: Vec<usize> = (0..cfg.coupling_layers)
+        .map(|i| {
+            let moved = if i % 2 == 0 { d / 2 } else { d - d / 2 };
+            let mut widths = cfg.coupling_hidden.clone();
+            widths.push(moved);
+            2 * mlp_macs(d - moved + context, &widths).0
         })
         .collect();
-    rates.sort_by(f64::total_cmp);
-    (rates[0], rates[runs / 2], rates[runs - 1])
+    let coupling: usize = per_layer.iter().sum();
+    let last_coupling = per_layer.last().copied().unwrap_or(0);
+    let (h_v, h_e, h_q) = (critic[0], cfg.embedding_layers[0], critic[0]);
+
+    // candle: V-bar, Q(s, a), Q(s, a~), V, E, sampling pass, inverse pass forward; backward
+    // through Q(s, a), V, E and the inverse pass.
+    let forward = v_all + 2 * q_all + v_all + e_all + 2 * coupling;
+    let backward = q_all + v_all + e_all + coupling;
+    let nominal = (2 * forward + 4 * backward) * rows;
+
+    // fused forward: V-bar, the stacked first layer, the rest of V and E, Q's action product and
+    // rest on 2 rows per transition, the sampling pass, the inverse pass without its first layer.
+    let exec_forward =
+        v_all + o * (h_v + h_e + h_q) + v_rest + e_rest + 2 * (d * h_q + q_rest) + 2 * coupling
+            - last_coupling;
+    // fused backward: weight and input gradients of every layer but the first, weight gradients
+    // only for first layers; both for every coupling net (dL/dc needs their input gradients).
+    let exec_backward =
+        (2 * q_rest + (o + d) * h_q) + (2 * v_rest + o * h_v) + (2 * e_rest + o * h_e) + 2 * coupling;
+    let executed = 2 * (exec_forward + exec_backward) * rows;
+    (nominal as f64, executed as f64)
+}
+
+fn print_rate(label: &str, r: Rates, flop: f64) {
+    let (lo, med, hi) = r.wall;
+    let gflops = med * flop / 1e9;
+    let on_cpu = r.on_cpu.map_or(String::new(), |c| format!("; {c:7.1}/s per on-CPU second"));
+    println!(
+        "{label:<36} {lo:7.1} / {med:7.1} / {hi:7.1} updates/s  {gflops:5.1} GFLOP/s = {:4.1}% of peak{on_cpu}",
+        100.0 * gflops / PEAK_GFLOPS
+    );
 }
 
 fn main() -> agent::Result<()> {
     let quick = std::env::args().any(|a| a == "--test");
     let (warmup, runs, per_window, acts) = if quick { (2, 1, 2, 10) } else { (100, 5, 200, 20_000) };
-    let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "default".into());
-    println!("agent update bench (candle CPU, RAYON_NUM_THREADS={threads}), batch 128");
-    let variants = [
-        ("paper", 105, AgentConfig::for_task(105, 8)),
-        ("paper", 125, AgentConfig::for_task(125, 8)),
-        (
-            "twin+reparam+alpha",
-            105,
-            AgentConfig {
-                twin_q: true,
-                reparameterize: true,
-                learn_temperature: true,
-                ..AgentConfig::for_task(105, 8)
-            },
-        ),
-    ];
-    for (name, obs_dim, cfg) in variants {
+    // Both learners use RAYON_NUM_THREADS threads for their matrix products (candle reads it
+    // itself, every core when unset; the fused learner is told, 1 when unset).
+    let threads: usize = std::env::var("RAYON_NUM_THREADS").ok().and_then(|t| t.parse().ok()).unwrap_or(1);
+    println!(
+        "agent update bench, {threads} thread(s), batch 128; peak taken as {PEAK_GFLOPS} GFLOP/s per core"
+    );
+    println!(
+        "updates/s: min / median / max of {runs} windows of {per_window} updates; GFLOP/s of the median"
+    );
+    for obs_dim in [105, 125] {
+        let cfg = AgentConfig::for_task(obs_dim, 8);
+        let (nominal, executed) = flops(&cfg, 128);
+        println!(
+            "\nobs {obs_dim} act 8: {:.1} MFLOP nominal per update, {:.1} MFLOP executed by the fused update",
+            nominal / 1e6,
+            executed / 1e6
+        );
         let mut rng = StdRng::seed_from_u64(1);
         let b = batch(&cfg, 128, &mut rng);
-        let mut learner = Learner::new(cfg.clone(), 1)?;
-        for _ in 0..warmup {
-            learner.update(&b)?;
-        }
-        let (lo, med, hi) = rate(runs, per_window, || {
-            learner.update(&b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
-        });
-        println!(
-            "update  {name:<20} obs {obs_dim:>3} act 8: {lo:7.1} / {med:7.1} / {hi:7.1} updates/s (min/median/max)"
-        );
 
-        let mut actor = learner.actor(2)?;
+        let mut candle = Learner::new(cfg.clone(), 1)?;
+        for _ in 0..warmup {
+            candle.update(&b)?;
+        }
+        let r = rate(runs, per_window, || {
+            candle.update(&b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
+        });
+        print_rate("candle (nominal FLOPs)", r, nominal);
+
+        for (label, exact) in [("fused", false), ("fused, exact tanh", true)] {
+            let mut fused = FusedLearner::new(cfg.clone(), 1)?.with_threads(threads).with_exact_tanh(exact);
+            for _ in 0..warmup {
+                fused.update(&b)?;
+            }
+            let r = rate(runs, per_window, || {
+                fused.update(&b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
+            });
+            print_rate(&format!("{label} (executed FLOPs)"), r, executed);
+        }
+
+        let mut actor = candle.actor(2)?;
         let obs: Vec<f32> = b.observations[..obs_dim].to_vec();
-        let one = batch(&cfg, 1, &mut rng);
         for (label, mode) in [("act explore", Mode::Explore), ("act deterministic", Mode::Deterministic)] {
             let (lo, med, hi) = rate(runs, acts, || {
                 std::hint::black_box(actor.act(&obs, mode).unwrap_or_else(|e| panic!("act failed: {e}")));
-            });
+            })
+            .wall;
             println!(
-                "{label:<18} obs {obs_dim:>3}: {:6.2} / {:6.2} / {:6.2} us (min/median/max)",
+                "candle {label:<18} batch 1: {:6.2} / {:6.2} / {:6.2} us (min/median/max)",
                 1e6 / hi,
                 1e6 / med,
                 1e6 / lo
             );
         }
+        let one = batch(&cfg, 1, &mut rng);
         let (lo, med, hi) = rate(runs, acts, || {
             std::hint::black_box(actor.td_errors(&one).unwrap_or_else(|e| panic!("td failed: {e}")));
-        });
+        })
+        .wall;
         println!(
-            "td_errors batch 1  obs {obs_dim:>3}: {:6.2} / {:6.2} / {:6.2} us (min/median/max)",
+            "candle td_errors        batch 1: {:6.2} / {:6.2} / {:6.2} us (min/median/max)",
             1e6 / hi,
             1e6 / med,
             1e6 / lo

@@ -93,6 +93,15 @@ fn splitmix64(mut x: u64) -> u64 {
     x ^ (x >> 31)
 }
 
+/// Fills `out` (row-major `[rows, act_dim]`) with the latents z ~ N(0, I) of update `step` of a
+/// learner seeded with `seed`; shared with the fused learner so both draw the same noise.
+pub(crate) fn fill_latent_noise(seed: u64, step: u64, out: &mut [f32]) {
+    let mut rng = StdRng::seed_from_u64(splitmix64(seed ^ splitmix64(step)));
+    for z in out {
+        *z = rng.sample(StandardNormal);
+    }
+}
+
 /// Trains one SAC-LSP level: the policy, Q (or twin Q), V, target V-bar, and optionally alpha.
 #[derive(Debug)]
 pub struct Learner {
@@ -164,9 +173,8 @@ impl Learner {
     /// Latents z ~ N(0, I) for update `step`: a stream per (seed, step), so a restored checkpoint
     /// draws the same noise as the run it came from.
     fn latent_noise(&self, rows: usize) -> Result<Tensor> {
-        let mut rng = StdRng::seed_from_u64(splitmix64(self.seed ^ splitmix64(self.step)));
-        let n = rows * self.cfg.act_dim;
-        let z: Vec<f32> = (0..n).map(|_| rng.sample(StandardNormal)).collect();
+        let mut z = vec![0.0; rows * self.cfg.act_dim];
+        fill_latent_noise(self.seed, self.step, &mut z);
         Ok(Tensor::from_vec(z, (rows, self.cfg.act_dim), &Device::Cpu)?)
     }
 

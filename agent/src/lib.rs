@@ -21,6 +21,7 @@
 //! | `stack.rs` | [`PolicyStack`]: frozen lower levels of a hierarchy |
 //! | `params.rs` | [`ParamSnapshot`], [`Checkpoint`]: safetensors bytes with stable names |
 //! | `networks.rs`, `vars.rs` | the networks of one level, each in its own `VarMap`, seeded init |
+//! | `fused/` | [`FusedLearner`]: the same update hand-fused on `gemm`; [`AnyLearner`] picks a [`Backend`] |
 //!
 //! # Use
 //!
@@ -59,6 +60,7 @@ mod coupling;
 mod critic;
 mod density;
 mod error;
+mod fused;
 mod learning;
 mod losses;
 mod mlp;
@@ -80,6 +82,7 @@ pub use density::{
     tanh_log_det_jacobian,
 };
 pub use error::{Error, Result};
+pub use fused::{AnyLearner, Backend, FusedLearner};
 pub use learning::{Learner, Metrics, UpdateOutput};
 pub use losses::{
     likelihood_ratio_policy_loss, q_loss, q_target, reparameterized_policy_loss, td_error, temperature_loss,
