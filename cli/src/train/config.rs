@@ -1,6 +1,7 @@
 //! The `[train]` table: the single-machine loop of the dissertation's "SAC-LSP" and "Prioritized
 //! SAC-LSP" runs (seed-impl §1.4, §2.1). The same run file carries `[agent]` and `[replay]`.
 
+use agent::Backend;
 use serde::Deserialize;
 use sim::Task;
 
@@ -27,6 +28,9 @@ pub struct TrainConfig {
     /// Copy the learner's weights to the acting policy every this many env steps. Default 1 (the
     /// paper acts with the current parameters).
     pub sync_actor_every_steps: u64,
+    /// Which learner runs the updates: `auto` (default: the fused learner where it implements the
+    /// configuration, else candle), `candle` or `fused`. Both compute the same update.
+    pub backend: Backend,
 }
 
 impl Default for TrainConfig {
@@ -41,6 +45,7 @@ impl Default for TrainConfig {
             eval_episodes: 1,
             checkpoint_every_epochs: 100,
             sync_actor_every_steps: 1,
+            backend: Backend::Auto,
         }
     }
 }

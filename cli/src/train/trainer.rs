@@ -5,7 +5,7 @@
 
 use std::time::Instant;
 
-use agent::{Actor, Batch, Learner, Mode};
+use agent::{Actor, AnyLearner, Batch, Mode};
 use anyhow::{Context, Result};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -29,7 +29,7 @@ pub struct Trainer {
     config: RunConfig,
     env: Box<dyn Environment>,
     eval_env: Box<dyn Environment>,
-    learner: Learner,
+    learner: AnyLearner,
     actor: Actor,
     replay: ReplayBuffer,
     rng: StdRng,
@@ -60,7 +60,8 @@ impl Trainer {
         let task = config.train.task().map_err(anyhow::Error::msg)?;
         let mut env = task.make(seed + 2)?;
         let eval_env = task.make(seed + 3)?;
-        let learner = Learner::new(config.agent.clone(), seed)?;
+        let learner = AnyLearner::new(config.agent.clone(), seed, config.train.backend)?;
+        tracing::info!(backend = ?learner.backend(), "learner");
         let mut actor = learner.actor(seed + 1)?;
         actor.load(&learner.snapshot()?)?;
         let replay = ReplayBuffer::new(config.replay.clone(), config.dims())?;
@@ -84,7 +85,7 @@ impl Trainer {
     }
 
     /// The learner (for checkpoints and snapshots).
-    pub fn learner(&self) -> &Learner {
+    pub fn learner(&self) -> &AnyLearner {
         &self.learner
     }
 
