@@ -37,9 +37,10 @@ fn batch(cfg: &AgentConfig, size: usize, rng: &mut StdRng) -> Batch {
     }
 }
 
-/// Nanoseconds this thread has spent on a CPU (`/proc/thread-self/schedstat`), if readable: the
-/// machine is shared, so rates are also given per on-CPU second, which time spent descheduled
-/// does not dilute.
+/// Nanoseconds this thread has spent on a CPU (`/proc/thread-self/schedstat`, updated at
+/// scheduler ticks, so good to ~1% over a window), if readable: the machine is shared, so
+/// single-threaded rates are also given per on-CPU second, which time spent descheduled does not
+/// dilute. (With more threads the other workers' time would be missing: not printed.)
 fn thread_cpu_ns() -> Option<u64> {
     std::fs::read_to_string("/proc/thread-self/schedstat").ok()?.split_whitespace().next()?.parse().ok()
 }
@@ -53,15 +54,17 @@ struct Rates {
     on_cpu: Option<f64>,
 }
 
-fn rate(runs: usize, per_window: usize, mut f: impl FnMut()) -> Rates {
+fn rate(runs: usize, per_window: usize, single_thread: bool, mut f: impl FnMut()) -> Rates {
     let (mut wall, mut on_cpu) = (Vec::new(), Vec::new());
     for _ in 0..runs {
-        let (start, cpu_start) = (Instant::now(), thread_cpu_ns());
+        let (start, cpu_start) = (Instant::now(), thread_cpu_ns().filter(|_| single_thread));
         for _ in 0..per_window {
             f();
         }
         wall.push(per_window as f64 / start.elapsed().as_secs_f64());
-        if let (Some(a), Some(b)) = (cpu_start, thread_cpu_ns()) {
+        if let (Some(a), Some(b)) = (cpu_start, thread_cpu_ns())
+            && b > a
+        {
             on_cpu.push(per_window as f64 / ((b - a) as f64 * 1e-9));
         }
     }
@@ -163,7 +166,7 @@ fn main() -> agent::Result<()> {
         for _ in 0..warmup {
             candle.update(&b)?;
         }
-        let r = rate(runs, per_window, || {
+        let r = rate(runs, per_window, threads == 1, || {
             candle.update(&b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
         });
         print_rate("candle (nominal FLOPs)", r, nominal);
@@ -173,7 +176,7 @@ fn main() -> agent::Result<()> {
             for _ in 0..warmup {
                 fused.update(&b)?;
             }
-            let r = rate(runs, per_window, || {
+            let r = rate(runs, per_window, threads == 1, || {
                 fused.update(&b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
             });
             print_rate(&format!("{label} (executed FLOPs)"), r, executed);
@@ -182,7 +185,7 @@ fn main() -> agent::Result<()> {
         let mut actor = candle.actor(2)?;
         let obs: Vec<f32> = b.observations[..obs_dim].to_vec();
         for (label, mode) in [("act explore", Mode::Explore), ("act deterministic", Mode::Deterministic)] {
-            let (lo, med, hi) = rate(runs, acts, || {
+            let (lo, med, hi) = rate(runs, acts, false, || {
                 std::hint::black_box(actor.act(&obs, mode).unwrap_or_else(|e| panic!("act failed: {e}")));
             })
             .wall;
@@ -194,7 +197,7 @@ fn main() -> agent::Result<()> {
             );
         }
         let one = batch(&cfg, 1, &mut rng);
-        let (lo, med, hi) = rate(runs, acts, || {
+        let (lo, med, hi) = rate(runs, acts, false, || {
             std::hint::black_box(actor.td_errors(&one).unwrap_or_else(|e| panic!("td failed: {e}")));
         })
         .wall;
