@@ -1,11 +1,18 @@
 //! The parameter server: holds the latest weights keyed by the global step, announces each new step,
 //! and enforces the executors' barrier.
 //!
-//! Skeleton: it joins the bus and announces itself (liveliness) until shut down; its issue fills in the
-//! behaviour. `run` is the whole role, so the binary and the in-process test harness share it.
+//! So far: the sans-IO cores ([`Barrier`]: the per-executor global-step barrier; [`ParamStore`]: the
+//! latest weights). The zenoh shell is still a skeleton that joins the bus and announces itself
+//! (liveliness) until shut down; its issue fills in the behaviour. `run` is the whole role, so the
+//! binary and the in-process test harness share it.
 #![deny(missing_docs)]
 
+mod barrier;
 mod config;
+mod store;
+
+pub use barrier::{Barrier, BarrierRule, Permit, WaitReason};
+pub use store::{ParamStore, Rejected, StoreCounts};
 
 pub use config::ParamServerConfig;
 use node::{Bus, Shutdown};

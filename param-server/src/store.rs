@@ -1,0 +1,79 @@
+//! The latest weights, sans-IO: what the param server republishes and serves on its queryable.
+
+use proto::WeightsSnapshot;
+
+/// Why a snapshot was not taken.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Rejected {
+    /// Its version is not newer than the one held (a late or repeated publish).
+    NotNewer {
+        /// The snapshot's version.
+        version: u64,
+        /// The version held.
+        held: u64,
+    },
+}
+
+/// How many snapshots a [`ParamStore`] took and refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StoreCounts {
+    /// Snapshots that became the latest.
+    pub accepted: u64,
+    /// Snapshots refused as not newer.
+    pub rejected: u64,
+}
+
+/// Holds the newest weights snapshot; versions (global steps) only move forward.
+#[derive(Debug, Default, Clone)]
+pub struct ParamStore {
+    latest: Option<WeightsSnapshot>,
+    accepted: u64,
+    rejected: u64,
+}
+
+impl ParamStore {
+    /// Takes `snapshot` if it is newer than the one held.
+    pub fn offer(&mut self, snapshot: WeightsSnapshot) -> Result<u64, Rejected> {
+        if let Some(held) = &self.latest
+            && snapshot.version <= held.version
+        {
+            self.rejected += 1;
+            return Err(Rejected::NotNewer { version: snapshot.version, held: held.version });
+        }
+        self.accepted += 1;
+        let version = snapshot.version;
+        self.latest = Some(snapshot);
+        Ok(version)
+    }
+
+    /// The newest snapshot, if any has arrived.
+    pub fn latest(&self) -> Option<&WeightsSnapshot> {
+        self.latest.as_ref()
+    }
+
+    /// Snapshots taken and refused so far.
+    pub fn counts(&self) -> StoreCounts {
+        StoreCounts { accepted: self.accepted, rejected: self.rejected }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn snapshot(version: u64) -> WeightsSnapshot {
+        WeightsSnapshot { version, learner_step: version, safetensors: vec![version as u8; 4] }
+    }
+
+    #[test]
+    fn only_newer_versions_replace_the_latest() {
+        let mut store = ParamStore::default();
+        assert!(store.latest().is_none());
+        assert_eq!(store.offer(snapshot(10)), Ok(10));
+        assert_eq!(store.offer(snapshot(5)), Err(Rejected::NotNewer { version: 5, held: 10 }));
+        assert_eq!(store.offer(snapshot(10)), Err(Rejected::NotNewer { version: 10, held: 10 }));
+        assert_eq!(store.offer(snapshot(20)), Ok(20));
+        assert_eq!(store.latest().map(|s| s.version), Some(20));
+        assert_eq!(store.counts(), StoreCounts { accepted: 2, rejected: 2 });
+    }
+}
