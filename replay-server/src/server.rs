@@ -111,16 +111,18 @@ pub(crate) async fn start(
 
 type SampleSubscriber = Subscriber<FifoChannelHandler<Sample>>;
 
+/// The next received sample, or `None` once shutdown fires or the subscriber closes.
+async fn next_sample(sub: &SampleSubscriber, shutdown: &mut Shutdown) -> Option<Sample> {
+    tokio::select! {
+        biased;
+        _ = shutdown.wait() => None,
+        received = sub.recv_async() => received.ok(),
+    }
+}
+
 async fn experience_loop(ctx: Arc<Ctx>, sub: SampleSubscriber, mut shutdown: Shutdown) -> anyhow::Result<()> {
     loop {
-        let sample = tokio::select! {
-            biased;
-            _ = shutdown.wait() => break,
-            received = sub.recv_async() => match received {
-                Ok(sample) => sample,
-                Err(_) => break,
-            },
-        };
+        let Some(sample) = next_sample(&sub, &mut shutdown).await else { break };
         let payload = sample.payload().to_bytes();
         let now = Instant::now();
         if ctx.lock().check_experience_size(payload.len(), now).is_err() {
@@ -158,14 +160,7 @@ async fn wait_for_replica(ctx: &Ctx, shutdown: &mut Shutdown) {
 
 async fn priority_loop(ctx: Arc<Ctx>, sub: SampleSubscriber, mut shutdown: Shutdown) -> anyhow::Result<()> {
     loop {
-        let sample = tokio::select! {
-            biased;
-            _ = shutdown.wait() => break,
-            received = sub.recv_async() => match received {
-                Ok(sample) => sample,
-                Err(_) => break,
-            },
-        };
+        let Some(sample) = next_sample(&sub, &mut shutdown).await else { break };
         let decoded = proto::decode::<PriorityUpdate>(&sample.payload().to_bytes());
         // Rejections are counted and logged inside; nothing else to do with them here.
         let _ = ctx.lock().accept_priorities(decoded, Instant::now());
