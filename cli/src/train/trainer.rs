@@ -39,6 +39,7 @@ pub struct Trainer {
     updates: u64,
     epoch: u64,
     sampled: SampledBatch,
+    batch: Batch,
     started: Instant,
 }
 
@@ -80,6 +81,7 @@ impl Trainer {
             updates: 0,
             epoch: 0,
             sampled: SampledBatch::new(),
+            batch: Batch::default(),
             started: Instant::now(),
         })
     }
@@ -170,16 +172,21 @@ impl Trainer {
         self.replay.sample(batch_size, self.updates, &mut self.rng, &mut self.sampled)?;
         let prioritized = self.config.replay.mode == SamplingMode::Prioritized;
         let s = &self.sampled;
-        let batch = Batch {
-            size: batch_size,
-            observations: s.observations.clone(),
-            actions: s.actions.clone(),
-            rewards: s.rewards.clone(),
-            next_observations: s.next_observations.clone(),
-            terminated: s.terminated.iter().map(|&d| if d { 1.0 } else { 0.0 }).collect(),
-            is_weights: prioritized.then(|| s.is_weights.clone()),
-        };
-        let out = self.learner.update(&batch)?;
+        // Reuse one batch's buffers: this runs once per env step.
+        let batch = &mut self.batch;
+        batch.size = batch_size;
+        batch.observations.clone_from(&s.observations);
+        batch.actions.clone_from(&s.actions);
+        batch.rewards.clone_from(&s.rewards);
+        batch.next_observations.clone_from(&s.next_observations);
+        batch.terminated.clear();
+        batch.terminated.extend(s.terminated.iter().map(|&d| if d { 1.0 } else { 0.0 }));
+        match (&mut batch.is_weights, prioritized) {
+            (Some(weights), true) => weights.clone_from(&s.is_weights),
+            (weights, true) => *weights = Some(s.is_weights.clone()),
+            (weights, false) => *weights = None,
+        }
+        let out = self.learner.update(batch)?;
         if prioritized {
             let abs_td: Vec<f32> = out.td_errors.iter().map(|d| d.abs()).collect();
             self.replay.update_priorities(&s.slots, &s.generations, &abs_td)?;
