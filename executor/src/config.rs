@@ -1,18 +1,85 @@
-//! `[executor]` table of the run configuration.
+//! The executor's configuration: its `[executor]` table, plus the run's `[agent]` table (the same
+//! networks the learner trains) and the task and seed from `[train]`.
 
+use agent::AgentConfig;
 use serde::Deserialize;
+use sim::Task;
 
-/// Configuration of the executor role.
+/// The `[executor]` table.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct ExecutorConfig {
-    /// How often the role publishes its stats, in milliseconds.
+pub struct ExecutorSettings {
+    /// Transitions per published batch. A partial batch is also sent at the end of an episode and
+    /// before the executor waits at the barrier, so the learner is never starved of its warm-up.
+    /// Default 64.
+    pub batch_transitions: u32,
+    /// The barrier report (`control/barrier/<id>`) is sent at least this often. Default 100.
+    pub report_interval_ms: u64,
+    /// A wait (barrier, weights) that lasts this long is logged with its reason and re-reported;
+    /// the executor keeps waiting until the reason goes away or shutdown. Default 2000.
+    pub wait_deadline_ms: u64,
+    /// How long one weights query may take before it is retried. Default 2000.
+    pub weights_timeout_ms: u64,
+    /// Cut episodes at this many steps when shorter than the task's limit (tests, quick runs).
+    /// Default none: the task's own limit (1000 for the Ants).
+    pub max_episode_steps: Option<u32>,
+    /// How often the role publishes its stats, in milliseconds. Default 1000.
     pub stats_interval_ms: u64,
 }
 
-impl Default for ExecutorConfig {
+impl Default for ExecutorSettings {
     fn default() -> Self {
-        Self { stats_interval_ms: 1000 }
+        Self {
+            batch_transitions: 64,
+            report_interval_ms: 100,
+            wait_deadline_ms: 2000,
+            weights_timeout_ms: 2000,
+            max_episode_steps: None,
+            stats_interval_ms: 1000,
+        }
+    }
+}
+
+/// The `[train]` keys an executor reads (the rest of the table belongs to the single-machine loop).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(default)]
+pub struct RunKeys {
+    /// Task name (`ant-v5`, `ant-rllab`, `inverted-pendulum`). Default `ant-v5`.
+    pub task: String,
+    /// The run's seed; executor i derives its own streams from (seed, i).
+    pub seed: u64,
+}
+
+impl Default for RunKeys {
+    fn default() -> Self {
+        Self { task: "ant-v5".into(), seed: 1 }
+    }
+}
+
+/// Everything an executor reads from the run file.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(default)]
+pub struct ExecutorConfig {
+    /// `[executor]`.
+    pub executor: ExecutorSettings,
+    /// `[agent]`: the policy and critics (dimensions are set from the task).
+    pub agent: AgentConfig,
+    /// `[train]`: task and seed.
+    pub train: RunKeys,
+}
+
+impl ExecutorConfig {
+    /// The task, checked.
+    pub fn task(&self) -> Result<Task, String> {
+        self.train.task.parse::<Task>().map_err(|e| format!("[train] task: {e}"))
+    }
+
+    /// Sets the agent's dimensions from the task.
+    pub fn fitted(mut self) -> Result<Self, String> {
+        let env = self.task()?.make(0).map_err(|e| e.to_string())?;
+        self.agent.obs_dim = env.spec().obs_dim;
+        self.agent.act_dim = env.spec().act_dim;
+        Ok(self)
     }
 }
 
@@ -20,9 +87,55 @@ impl node::RoleConfig for ExecutorConfig {
     const SECTION: &'static str = "executor";
 
     fn validate(&self) -> Result<(), String> {
-        if self.stats_interval_ms == 0 {
-            return Err("stats_interval_ms must be > 0".into());
+        let s = &self.executor;
+        let positive = [
+            ("batch_transitions", u64::from(s.batch_transitions)),
+            ("report_interval_ms", s.report_interval_ms),
+            ("wait_deadline_ms", s.wait_deadline_ms),
+            ("weights_timeout_ms", s.weights_timeout_ms),
+            ("stats_interval_ms", s.stats_interval_ms),
+        ];
+        if let Some((key, _)) = positive.iter().find(|(_, v)| *v == 0) {
+            return Err(format!("[executor] {key} must be > 0"));
         }
-        Ok(())
+        if s.batch_transitions as usize > proto::MAX_BATCH_LEN {
+            return Err(format!("[executor] batch_transitions must be at most {}", proto::MAX_BATCH_LEN));
+        }
+        self.task()?;
+        self.agent.validate().map_err(|e| format!("[agent] {e}"))
+    }
+
+    fn parse(text: &str) -> Result<Self, String> {
+        let config: ExecutorConfig = toml::from_str(text).map_err(|e| e.to_string())?;
+        config.fitted()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use node::RoleConfig;
+
+    use super::*;
+
+    #[test]
+    fn reads_its_table_the_agent_and_the_task() {
+        let text = "[train]\ntask = \"inverted-pendulum\"\nseed = 4\nepochs = 3\n[agent]\nscale_reward = 3.0\n\
+                    [executor]\nbatch_transitions = 8\n[replay]\nmode = \"uniform\"\n";
+        let c = ExecutorConfig::parse(text).unwrap();
+        assert_eq!((c.agent.obs_dim, c.agent.act_dim), (4, 1));
+        assert_eq!(c.executor.batch_transitions, 8);
+        assert_eq!(c.train.seed, 4);
+        assert_eq!(c.validate(), Ok(()));
+        assert!(
+            ExecutorConfig::parse("[executor]\nbatch_transitons = 8\n")
+                .unwrap_err()
+                .contains("batch_transitons")
+        );
+        assert!(ExecutorConfig::parse("[train]\ntask = \"ant-v9\"\n").is_err());
+        let zero = ExecutorConfig {
+            executor: ExecutorSettings { batch_transitions: 0, ..ExecutorSettings::default() },
+            ..c
+        };
+        assert!(zero.validate().unwrap_err().contains("batch_transitions"));
     }
 }

@@ -1,28 +1,209 @@
-//! An executor: steps its own environment with the current policy, computes each transition's initial
-//! priority and publishes batches of transitions to the replay server.
+//! An executor: steps its own environment with the current stochastic policy, computes each
+//! transition's initial priority with its local critics (Ape-X), and publishes batches of
+//! transitions to the replay server, never more than the global-step barrier allows.
+//! `run` is the whole role, so the binary and the in-process test harness share it.
 //!
-//! Skeleton: it joins the bus and announces itself (liveliness) until shut down; its issue fills in the
-//! behaviour. `run` is the whole role, so the binary and the in-process test harness share it.
+//! # Keys (under `rl/<run>/`)
+//!
+//! | key                         | direction | message                                              |
+//! |-----------------------------|-----------|------------------------------------------------------|
+//! | `control/step`              | in        | `GlobalStep`: the barrier and the newest weights version |
+//! | `params/weights` (get)      | query     | `WeightsSnapshot`, fetched only when the version changes |
+//! | `experience/<id>`           | out       | `ExperienceBatch` with initial priorities |δ|          |
+//! | `episodes/<id>`             | out       | `EpisodeReport` per finished episode                 |
+//! | `control/barrier/<id>`      | out       | `BarrierReport` every `report_interval_ms` and on each block/unblock |
+//! | `stats/executor/<id>`       | out       | `StatsReport`: env steps/s, weights lag, what it waits on |
+//! | `liveliness/executor/<id>`  | token     | declared once subscribed: the param server counts it live |
+//!
+//! # Layout
+//!
+//! | file         | what                                                                      |
+//! |--------------|---------------------------------------------------------------------------|
+//! | `config.rs`  | [`ExecutorConfig`]: `[executor]`, `[agent]`, `[train]` task and seed      |
+//! | `rollout.rs` | [`Rollout`]: env + actor + pending batch, sans-IO                         |
+//! | `inbox.rs`   | [`Inbox`]: newest step and weights, shell → thread                        |
+//! | `worker.rs`  | the rollout thread: barrier, waits with reasons, loading weights          |
+//! | `stats.rs`   | the stats report                                                          |
+//!
+//! The environment and the networks run on their own thread; the async shell only moves messages,
+//! so fetching weights never stalls stepping (they are loaded between two steps).
 #![deny(missing_docs)]
 
 mod config;
+mod inbox;
+mod rollout;
+mod stats;
+mod worker;
 
-pub use config::ExecutorConfig;
-use node::{Bus, Shutdown};
+use std::sync::Arc;
+use std::time::Duration;
+
+use agent::{Actor, ParamSnapshot};
+pub use config::{ExecutorConfig, ExecutorSettings, RunKeys};
+pub use inbox::{Control, Inbox};
+use node::{Bus, Rejects, Shutdown};
+use proto::{GlobalStep, WeightsSnapshot, topics};
+pub use rollout::{Rollout, StepOutcome};
+use tokio::sync::mpsc;
+pub use worker::{Out, Progress, Wait, WorkerReport};
+use zenoh::qos::CongestionControl;
 
 /// What the role did, returned when it stops.
 #[derive(Debug, Default, Clone, PartialEq)]
 pub struct Report {
     /// Seconds between start and shutdown.
     pub uptime_s: f64,
+    /// The rollout thread's report.
+    pub worker: WorkerReport,
+    /// Weight snapshots fetched.
+    pub weights_fetched: u64,
+    /// Experience batches published.
+    pub batches_published: u64,
+    /// Rejected inputs by reason.
+    pub rejected: std::collections::BTreeMap<String, u64>,
+}
+
+/// Seeds of executor `id` in a run seeded `seed`: distinct streams per executor (splitmix64).
+pub fn executor_seed(seed: u64, id: u32) -> u64 {
+    let mut z = seed.wrapping_add(0x9E37_79B9_7F4A_7C15u64.wrapping_mul(u64::from(id) + 1));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
 }
 
 /// Runs the executor until `shutdown` fires.
 pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> anyhow::Result<Report> {
     let started = std::time::Instant::now();
+    let id = bus.node().id;
+    let seed = executor_seed(config.train.seed, id);
+    let env = config.task().map_err(anyhow::Error::msg)?.make(seed)?;
+    let actor = Actor::new(config.agent.clone(), seed.wrapping_add(1))?;
+    let rollout = Rollout::new(id, env, actor, seed).with_episode_limit(config.executor.max_episode_steps);
+
+    let session = bus.session().clone();
+    let run = bus.run().clone();
+    let z = node::NodeError::zenoh;
+    let step_sub = session.declare_subscriber(topics::control_step(&run)).await.map_err(z)?;
+    let experience_pub = session
+        .declare_publisher(topics::experience(&run, id))
+        .congestion_control(CongestionControl::Block)
+        .await
+        .map_err(z)?;
     let _alive = bus.announce().await?;
-    tracing::info!(stats_interval_ms = config.stats_interval_ms, "executor up");
-    shutdown.wait().await;
+    tracing::info!(seed, task = %config.train.task, "executor up");
+
+    let inbox = Arc::new(Inbox::default());
+    let (out_tx, mut out_rx) = mpsc::channel(64);
+    let worker = {
+        let (inbox, settings) = (inbox.clone(), config.executor.clone());
+        std::thread::Builder::new()
+            .name(format!("rollout-{id}"))
+            .spawn(move || worker::run(id, rollout, inbox, out_tx, settings))?
+    };
+
+    let mut rejects = Rejects::default();
+    let mut report = Report::default();
+    let mut held_version: Option<u64> = None;
+    let mut latest: Option<GlobalStep> = None;
+    let mut fetch = tokio::time::interval(Duration::from_millis(500));
+    let weights_timeout = Duration::from_millis(config.executor.weights_timeout_ms);
+    let mut worker_done = false;
+    loop {
+        let want_weights = match (latest, held_version) {
+            (_, None) => true,
+            (Some(step), Some(held)) => step.weights_version > held,
+            (None, Some(_)) => false,
+        };
+        tokio::select! {
+            _ = shutdown.wait() => break,
+            Ok(sample) = step_sub.recv_async() => match proto::decode::<GlobalStep>(&sample.payload().to_bytes()) {
+                Ok(step) => {
+                    latest = Some(step);
+                    inbox.set_step(step);
+                    if step.weights_version > held_version.unwrap_or(0) || held_version.is_none() {
+                        fetch.reset_immediately();
+                    }
+                }
+                Err(error) => rejects.decode_failed("step", &error),
+            },
+            _ = fetch.tick(), if want_weights => {
+                match fetch_weights(&bus, weights_timeout).await {
+                    Ok(Some(snapshot)) if held_version.is_none_or(|h| snapshot.version > h) => {
+                        held_version = Some(snapshot.version);
+                        report.weights_fetched += 1;
+                        inbox.set_weights(ParamSnapshot { version: snapshot.version, safetensors: snapshot.safetensors });
+                    }
+                    Ok(_) => {}
+                    Err(FetchError::Decode(error)) => rejects.decode_failed("weights", &error),
+                    Err(FetchError::Unavailable(why)) => tracing::debug!(%why, "weights not available yet"),
+                }
+            }
+            message = out_rx.recv() => match message {
+                Some(message) => publish(&bus, &experience_pub, id, message, &mut report, &rejects).await,
+                None => { worker_done = true; break; }
+            },
+        }
+    }
+    inbox.stop();
+    // Drain what the thread still sends (its final flush) until it hangs up.
+    while !worker_done {
+        match tokio::time::timeout(Duration::from_secs(10), out_rx.recv()).await {
+            Ok(Some(message)) => publish(&bus, &experience_pub, id, message, &mut report, &rejects).await,
+            Ok(None) => worker_done = true,
+            Err(_) => anyhow::bail!("the rollout thread did not stop within 10 s"),
+        }
+    }
+    report.worker = match worker.join() {
+        Ok(result) => result?,
+        Err(_) => anyhow::bail!("the rollout thread panicked"),
+    };
+    report.uptime_s = started.elapsed().as_secs_f64();
+    report.rejected = rejects.counts().clone();
+    drop((step_sub, experience_pub));
     bus.close().await?;
-    Ok(Report { uptime_s: started.elapsed().as_secs_f64() })
+    Ok(report)
+}
+
+enum FetchError {
+    Decode(proto::DecodeError),
+    Unavailable(String),
+}
+
+/// One `get` of the latest weights.
+async fn fetch_weights(bus: &Bus, timeout: Duration) -> Result<Option<WeightsSnapshot>, FetchError> {
+    let key = topics::params_weights(bus.run());
+    let replies =
+        bus.session().get(&key).timeout(timeout).await.map_err(|e| FetchError::Unavailable(e.to_string()))?;
+    match replies.recv_async().await {
+        Ok(reply) => match reply.result() {
+            Ok(sample) => proto::decode(&sample.payload().to_bytes()).map(Some).map_err(FetchError::Decode),
+            Err(error) => {
+                Err(FetchError::Unavailable(String::from_utf8_lossy(&error.payload().to_bytes()).into()))
+            }
+        },
+        Err(_) => Ok(None),
+    }
+}
+
+async fn publish(
+    bus: &Bus,
+    experience: &zenoh::pubsub::Publisher<'_>,
+    id: u32,
+    message: Out,
+    report: &mut Report,
+    rejects: &Rejects,
+) {
+    let run = bus.run();
+    let result = match message {
+        Out::Experience(batch) => {
+            report.batches_published += 1;
+            experience.put(proto::encode(&batch)).await.map_err(node::NodeError::zenoh)
+        }
+        Out::Episode(episode) => bus.put(&topics::episodes(run, id), &episode).await,
+        Out::Barrier(barrier) => bus.put(&topics::control_barrier(run, id), &barrier).await,
+        Out::Progress(progress) => bus.put_stats(&stats::report(bus.node(), &progress, rejects)).await,
+    };
+    if let Err(error) = result {
+        tracing::warn!(%error, "publish failed");
+    }
 }

@@ -1,18 +1,106 @@
-//! `[learner]` table of the run configuration.
+//! The learner's configuration: its `[learner]` table, plus the run's `[agent]` table (the networks
+//! executors act with) and the task and seed from `[train]`.
 
+use std::path::PathBuf;
+
+use agent::{AgentConfig, Backend};
 use serde::Deserialize;
+use sim::Task;
 
-/// Configuration of the learner role.
+/// Environment variable overriding `[learner] checkpoint_dir`.
+pub const CHECKPOINT_DIR_ENV: &str = "SACLSP_CHECKPOINT_DIR";
+
+/// The `[learner]` table.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct LearnerConfig {
-    /// How often the role publishes its stats, in milliseconds.
+pub struct LearnerSettings {
+    /// Sample requests kept in flight, so a batch is ready whenever an update ends. Default 3.
+    pub prefetch_batches: u32,
+    /// How long one sample request may take before it counts as unanswered and is re-sent; must
+    /// exceed the replay server's `request_deadline_ms`. Default 5000.
+    pub sample_timeout_ms: u64,
+    /// Publish the weights to the param server every this many updates (and at step 0). Default 100.
+    pub publish_weights_every_updates: u64,
+    /// Report the learner step to the param server every this many updates. Default 10.
+    pub announce_every_updates: u64,
+    /// Updates per epoch: the unit of evaluation and checkpoints. Default 1000, as the paper.
+    pub epoch_length_updates: u64,
+    /// Deterministic evaluation episodes after each epoch (on a thread of their own). 0 = none.
+    /// Default 1, as the paper.
+    pub eval_episodes: u32,
+    /// Write a checkpoint every this many epochs (0: only at shutdown). Default 100.
+    pub checkpoint_every_epochs: u64,
+    /// Where checkpoints go; the newest one found there at start is resumed from. None = no checkpoints.
+    pub checkpoint_dir: Option<PathBuf>,
+    /// Stop after this many updates (None: until shut down). The paper ran 10M.
+    pub max_updates: Option<u64>,
+    /// Send |δ| back to the replay server after every update (prioritized replay). Default true.
+    pub send_priorities: bool,
+    /// Which update implementation runs (`auto`, `candle`, `fused`). Default `auto`.
+    pub backend: Backend,
+    /// How often the role publishes its stats, in milliseconds. Default 1000.
     pub stats_interval_ms: u64,
 }
 
-impl Default for LearnerConfig {
+impl Default for LearnerSettings {
     fn default() -> Self {
-        Self { stats_interval_ms: 1000 }
+        Self {
+            prefetch_batches: 3,
+            sample_timeout_ms: 5000,
+            publish_weights_every_updates: 100,
+            announce_every_updates: 10,
+            epoch_length_updates: 1000,
+            eval_episodes: 1,
+            checkpoint_every_epochs: 100,
+            checkpoint_dir: None,
+            max_updates: None,
+            send_priorities: true,
+            backend: Backend::Auto,
+            stats_interval_ms: 1000,
+        }
+    }
+}
+
+/// The `[train]` keys the learner reads (the rest of the table belongs to the single-machine loop).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(default)]
+pub struct RunKeys {
+    /// Task name; the learner evaluates on it and takes the networks' dimensions from it.
+    pub task: String,
+    /// The run's seed (networks, latent noise, evaluation resets).
+    pub seed: u64,
+}
+
+impl Default for RunKeys {
+    fn default() -> Self {
+        Self { task: "ant-v5".into(), seed: 1 }
+    }
+}
+
+/// Everything the learner reads from the run file.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(default)]
+pub struct LearnerConfig {
+    /// `[learner]`.
+    pub learner: LearnerSettings,
+    /// `[agent]`: the networks and the update (dimensions are set from the task).
+    pub agent: AgentConfig,
+    /// `[train]`: task and seed.
+    pub train: RunKeys,
+}
+
+impl LearnerConfig {
+    /// The task, checked.
+    pub fn task(&self) -> Result<Task, String> {
+        self.train.task.parse::<Task>().map_err(|e| format!("[train] task: {e}"))
+    }
+
+    /// Sets the agent's dimensions from the task.
+    pub fn fitted(mut self) -> Result<Self, String> {
+        let env = self.task()?.make(0).map_err(|e| e.to_string())?;
+        self.agent.obs_dim = env.spec().obs_dim;
+        self.agent.act_dim = env.spec().act_dim;
+        Ok(self)
     }
 }
 
@@ -20,9 +108,59 @@ impl node::RoleConfig for LearnerConfig {
     const SECTION: &'static str = "learner";
 
     fn validate(&self) -> Result<(), String> {
-        if self.stats_interval_ms == 0 {
-            return Err("stats_interval_ms must be > 0".into());
+        let s = &self.learner;
+        let positive = [
+            ("prefetch_batches", u64::from(s.prefetch_batches)),
+            ("sample_timeout_ms", s.sample_timeout_ms),
+            ("publish_weights_every_updates", s.publish_weights_every_updates),
+            ("announce_every_updates", s.announce_every_updates),
+            ("epoch_length_updates", s.epoch_length_updates),
+            ("stats_interval_ms", s.stats_interval_ms),
+        ];
+        if let Some((key, _)) = positive.iter().find(|(_, v)| *v == 0) {
+            return Err(format!("[learner] {key} must be > 0"));
         }
-        Ok(())
+        if s.prefetch_batches > 64 {
+            return Err("[learner] prefetch_batches must be at most 64".into());
+        }
+        if self.agent.batch_size > proto::MAX_BATCH_LEN {
+            return Err(format!("[agent] batch_size must be at most {}", proto::MAX_BATCH_LEN));
+        }
+        self.task()?;
+        self.agent.validate().map_err(|e| format!("[agent] {e}"))
+    }
+
+    /// The run file's tables; `SACLSP_CHECKPOINT_DIR`, when set, overrides `checkpoint_dir` (so a
+    /// launcher can put checkpoints in the run's folder without editing the shared run file).
+    fn parse(text: &str) -> Result<Self, String> {
+        let mut config: LearnerConfig = toml::from_str(text).map_err(|e| e.to_string())?;
+        if let Some(dir) = std::env::var_os(CHECKPOINT_DIR_ENV) {
+            config.learner.checkpoint_dir = Some(PathBuf::from(dir));
+        }
+        config.fitted()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use node::RoleConfig;
+
+    use super::*;
+
+    #[test]
+    fn reads_its_table_the_agent_and_the_task() {
+        let text = "[train]\ntask = \"ant-v5\"\nepochs = 3\n[learner]\nprefetch_batches = 2\n\
+                    checkpoint_dir = \"/tmp/x\"\n[agent]\nbatch_size = 64\n";
+        let c = LearnerConfig::parse(text).unwrap();
+        assert_eq!((c.agent.obs_dim, c.agent.act_dim), (105, 8));
+        assert_eq!(c.learner.prefetch_batches, 2);
+        assert_eq!(c.learner.checkpoint_dir, Some(PathBuf::from("/tmp/x")));
+        assert_eq!(c.validate(), Ok(()));
+        assert!(LearnerConfig::parse("[learner]\nprefetch = 2\n").unwrap_err().contains("prefetch"));
+        let zero = LearnerConfig {
+            learner: LearnerSettings { epoch_length_updates: 0, ..LearnerSettings::default() },
+            ..c
+        };
+        assert!(zero.validate().unwrap_err().contains("epoch_length_updates"));
     }
 }

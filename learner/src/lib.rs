@@ -1,28 +1,205 @@
-//! The learner: pulls prioritized batches from the replay server, trains SAC-LSP, sends back priorities
-//! and publishes weights through the parameter server.
+//! The learner: pulls prioritized batches from the replay server through a prefetch pipeline, runs
+//! SAC-LSP updates, sends back priorities, publishes weights to the param server every M updates
+//! and its step every few, evaluates once per epoch on a thread of its own, checkpoints every K
+//! epochs and resumes from the newest checkpoint. `run` is the whole role, so the binary and the
+//! in-process test harness share it.
 //!
-//! Skeleton: it joins the bus and announces itself (liveliness) until shut down; its issue fills in the
-//! behaviour. `run` is the whole role, so the binary and the in-process test harness share it.
+//! # Keys (under `rl/<run>/`)
+//!
+//! | key                   | direction | message                                        |
+//! |-----------------------|-----------|------------------------------------------------|
+//! | `replay/sample`       | query     | `SampleRequest` → `SampleReply`                 |
+//! | `replay/priorities`   | out       | `PriorityUpdate` after every update            |
+//! | `params/publish`      | out       | `WeightsSnapshot` every `publish_weights_every_updates` |
+//! | `control/learner`     | out       | `LearnerStep` every `announce_every_updates`   |
+//! | `eval`                | out       | `EvalReport` per epoch                          |
+//! | `stats/learner/<id>`  | out       | `StatsReport`: updates/s, losses, waiting        |
+//! | `liveliness/learner/<id>` | token | declared at start                               |
+//!
+//! # Layout
+//!
+//! | file            | what                                                           |
+//! |-----------------|----------------------------------------------------------------|
+//! | `config.rs`     | [`LearnerConfig`]: `[learner]`, `[agent]`, `[train]` task and seed |
+//! | `fetch.rs`      | the prefetch pipeline: request loops with timeouts and reasons  |
+//! | `batch.rs`      | [`Sampled`]: wire batch → agent batch                           |
+//! | `updater.rs`    | [`Updater`]: the update thread                                  |
+//! | `evaluate.rs`   | [`evaluate`]: deterministic evaluation episodes                 |
+//! | `checkpoint.rs` | [`CheckpointDir`]: atomic checkpoint files, resume              |
+//! | `stats.rs`      | the stats report                                                |
 #![deny(missing_docs)]
 
+mod batch;
+mod checkpoint;
 mod config;
+mod evaluate;
+mod fetch;
+mod stats;
+mod updater;
 
-pub use config::LearnerConfig;
+use std::sync::Arc;
+use std::sync::atomic::AtomicU64;
+use std::time::{Duration, Instant};
+
+use agent::{Actor, AnyLearner, ParamSnapshot};
+pub use batch::Sampled;
+pub use checkpoint::CheckpointDir;
+pub use config::{LearnerConfig, LearnerSettings, RunKeys};
+pub use evaluate::{Evaluation, evaluate};
+pub use fetch::{FetchStatus, Fetcher, Requests};
 use node::{Bus, Shutdown};
+use proto::{EvalReport, topics};
+use tokio::sync::mpsc;
+pub use updater::{LossMeans, Out, Progress, Updater, UpdaterReport};
 
 /// What the role did, returned when it stops.
 #[derive(Debug, Default, Clone, PartialEq)]
 pub struct Report {
     /// Seconds between start and shutdown.
     pub uptime_s: f64,
+    /// The update thread's report (start and final step, weights published, checkpoints).
+    pub updater: UpdaterReport,
+    /// Evaluations completed.
+    pub evaluations: Vec<EvalReport>,
+    /// The prefetch pipeline's counters.
+    pub fetch: FetchStatus,
 }
 
-/// Runs the learner until `shutdown` fires.
+/// Runs the learner until `shutdown` fires (or `max_updates` is reached).
 pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> anyhow::Result<Report> {
-    let started = std::time::Instant::now();
+    let started = Instant::now();
+    let s = config.learner.clone();
+    let seed = config.train.seed;
+    let checkpoints = s.checkpoint_dir.as_ref().map(CheckpointDir::new);
+    let learner = match checkpoints.as_ref().map(CheckpointDir::latest).transpose()?.flatten() {
+        Some(checkpoint) => {
+            tracing::info!(step = checkpoint.step, "resuming from checkpoint");
+            AnyLearner::from_checkpoint(config.agent.clone(), &checkpoint, s.backend)?
+        }
+        None => AnyLearner::new(config.agent.clone(), seed, s.backend)?,
+    };
+    tracing::info!(backend = ?learner.backend(), step = learner.step(), "learner up");
+    let step = Arc::new(AtomicU64::new(learner.step()));
     let _alive = bus.announce().await?;
-    tracing::info!(stats_interval_ms = config.stats_interval_ms, "learner up");
-    shutdown.wait().await;
+
+    let (out_tx, mut out_rx) = mpsc::channel(256);
+    let eval = if s.eval_episodes > 0 {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<(u64, ParamSnapshot)>(1);
+        let env = config.task().map_err(anyhow::Error::msg)?.make(seed.wrapping_add(3))?;
+        let actor = Actor::new(config.agent.clone(), seed.wrapping_add(5))?;
+        let (out, episodes) = (out_tx.clone(), s.eval_episodes);
+        std::thread::Builder::new()
+            .name("evaluate".into())
+            .spawn(move || evaluation_thread(env, actor, episodes, rx, out))?;
+        Some(tx)
+    } else {
+        None
+    };
+    let (batch_tx, batch_rx) = mpsc::channel(s.prefetch_batches as usize);
+    let updater =
+        Updater { learner, settings: s.clone(), out: out_tx, eval, checkpoints, step: step.clone() };
+    let update_thread =
+        std::thread::Builder::new().name("update".into()).spawn(move || updater.run(batch_rx))?;
+
+    let fetcher = Arc::new(Fetcher::default());
+    let requests = Requests {
+        bus: bus.clone(),
+        fetcher: fetcher.clone(),
+        step,
+        batch_size: config.agent.batch_size as u32,
+        timeout: Duration::from_millis(s.sample_timeout_ms),
+        prioritized: s.send_priorities,
+    };
+    let loops: Vec<_> = (0..s.prefetch_batches)
+        .map(|_| tokio::spawn(fetch::request_loop(requests.clone(), batch_tx.clone(), shutdown.clone())))
+        .collect();
+    drop(batch_tx);
+
+    let mut evaluations = Vec::new();
+    loop {
+        tokio::select! {
+            _ = shutdown.wait() => break,
+            message = out_rx.recv() => match message {
+                Some(message) => publish(&bus, message, &fetcher, &mut evaluations).await,
+                None => break,
+            },
+        }
+    }
+    // Stop the request loops; the update thread then sees its batches end, publishes its final
+    // weights and checkpoint, and hangs up.
+    for request_loop in &loops {
+        request_loop.abort();
+    }
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !update_thread.is_finished() {
+        match tokio::time::timeout_at(deadline.into(), out_rx.recv()).await {
+            Ok(Some(message)) => publish(&bus, message, &fetcher, &mut evaluations).await,
+            Ok(None) => tokio::time::sleep(Duration::from_millis(5)).await,
+            Err(_) => anyhow::bail!("the update thread did not stop within 30 s"),
+        }
+    }
+    let updater = match update_thread.join() {
+        Ok(result) => result?,
+        Err(_) => anyhow::bail!("the update thread panicked"),
+    };
+    while let Ok(message) = out_rx.try_recv() {
+        publish(&bus, message, &fetcher, &mut evaluations).await;
+    }
+    let report =
+        Report { uptime_s: started.elapsed().as_secs_f64(), updater, evaluations, fetch: fetcher.status() };
     bus.close().await?;
-    Ok(Report { uptime_s: started.elapsed().as_secs_f64() })
+    Ok(report)
+}
+
+/// Evaluates each (epoch, weights) it receives and reports the result; ends when the sender does.
+fn evaluation_thread(
+    mut env: Box<dyn sim::Environment>,
+    mut actor: Actor,
+    episodes: u32,
+    requests: std::sync::mpsc::Receiver<(u64, ParamSnapshot)>,
+    out: mpsc::Sender<Out>,
+) {
+    for (epoch, snapshot) in requests {
+        let learner_step = snapshot.version;
+        let result = actor
+            .load(&snapshot)
+            .map_err(anyhow::Error::from)
+            .and_then(|()| evaluate(&mut actor, env.as_mut(), episodes));
+        match result {
+            Ok(e) => {
+                tracing::info!(epoch, learner_step, mean_return = e.mean_return, "evaluation");
+                let report = EvalReport {
+                    epoch,
+                    learner_step,
+                    episodes,
+                    mean_return: e.mean_return,
+                    mean_length: e.mean_length,
+                };
+                if out.blocking_send(Out::Eval(report)).is_err() {
+                    return;
+                }
+            }
+            Err(error) => tracing::error!(%error, "evaluation failed"),
+        }
+    }
+}
+
+async fn publish(bus: &Bus, message: Out, fetcher: &Fetcher, evaluations: &mut Vec<EvalReport>) {
+    let run = bus.run();
+    let result = match message {
+        Out::Priorities(update) => bus.put(&topics::replay_priorities(run), &update).await,
+        Out::Step(step) => bus.put(&topics::control_learner(run), &step).await,
+        Out::Weights(weights) => bus.put(&topics::params_publish(run), &weights).await,
+        Out::Eval(report) => {
+            evaluations.push(report);
+            bus.put(&topics::evaluation(run), &report).await
+        }
+        Out::Progress(progress) => {
+            let last_eval = evaluations.last().copied();
+            bus.put_stats(&stats::report(bus.node(), &progress, &fetcher.status(), last_eval)).await
+        }
+    };
+    if let Err(error) = result {
+        tracing::warn!(%error, "publish failed");
+    }
 }

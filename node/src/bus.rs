@@ -54,6 +54,15 @@ impl Bus {
             .map_err(NodeError::zenoh)
     }
 
+    /// Publishes this process's stats on `stats/<role>/<id>`. Dropped rather than blocking under
+    /// congestion: the next report supersedes it.
+    pub async fn put_stats(&self, report: &proto::StatsReport) -> Result<(), NodeError> {
+        self.session
+            .put(proto::topics::stats(&self.run, self.node), proto::encode(report))
+            .await
+            .map_err(NodeError::zenoh)
+    }
+
     /// Declares this process alive under `liveliness/<role>/<id>` for as long as the token lives; peers
     /// see it vanish when the process dies, however it dies.
     pub async fn announce(&self) -> Result<LivelinessToken, NodeError> {

@@ -15,6 +15,12 @@ pub trait RoleConfig: DeserializeOwned + Default {
 
     /// Checks every value; the message names the offending key.
     fn validate(&self) -> Result<(), String>;
+
+    /// Reads the config from a whole run file: by default its own table (defaults when it is
+    /// missing). Roles that also need shared tables (`[agent]`, the task) override this.
+    fn parse(text: &str) -> Result<Self, String> {
+        parse_section(text, Self::SECTION)
+    }
 }
 
 /// Loads and validates `T`'s table from `path` (defaults when there is no file or no table).
@@ -23,7 +29,7 @@ pub fn load<T: RoleConfig>(path: Option<&Path>) -> Result<T, NodeError> {
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .map_err(|source| NodeError::ConfigRead { path: path.to_path_buf(), source })?;
-            parse_section(&text, T::SECTION).map_err(|message| NodeError::ConfigParse {
+            T::parse(&text).map_err(|message| NodeError::ConfigParse {
                 path: path.to_path_buf(),
                 section: T::SECTION.to_string(),
                 message,

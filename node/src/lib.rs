@@ -8,15 +8,19 @@
 
 mod args;
 mod bus;
+mod clock;
 pub mod config;
 mod error;
 mod launch;
+mod rejects;
 mod shutdown;
 pub mod telemetry;
 
 pub use args::{BusConfig, NodeArgs, ZenohMode};
 pub use bus::{Bus, decode_payload};
+pub use clock::unix_ms;
 pub use config::RoleConfig;
 pub use error::NodeError;
 pub use launch::launch;
+pub use rejects::Rejects;
 pub use shutdown::{Shutdown, ShutdownTrigger};

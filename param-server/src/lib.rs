@@ -1,35 +1,150 @@
-//! The parameter server: holds the latest weights keyed by the global step, announces each new step,
-//! and enforces the executors' barrier.
+//! The parameter server: holds the latest weights keyed by the global step, announces each new step
+//! and weights version, and owns the executors' barrier. `run` is the whole role, so the binary and
+//! the in-process test harness share it.
 //!
-//! So far: the sans-IO cores ([`Barrier`]: the per-executor global-step barrier; [`ParamStore`]: the
-//! latest weights). The zenoh shell is still a skeleton that joins the bus and announces itself
-//! (liveliness) until shut down; its issue fills in the behaviour. `run` is the whole role, so the
-//! binary and the in-process test harness share it.
+//! # Keys (under `rl/<run>/`)
+//!
+//! | key                          | direction | message                                                 |
+//! |------------------------------|-----------|---------------------------------------------------------|
+//! | `params/publish`             | in        | `WeightsSnapshot` from the learner                      |
+//! | `params/weights` (queryable) | out       | the latest `WeightsSnapshot` (error reply before one exists) |
+//! | `control/learner`            | in        | `LearnerStep`: the learner's progress                   |
+//! | `control/barrier/*`          | in        | `BarrierReport` from each executor                      |
+//! | `liveliness/executor/*`      | in        | executors joining and dying                             |
+//! | `control/step`               | out       | `GlobalStep` on every change and every `announce_interval_ms` |
+//! | `stats/param/<id>`           | out       | `StatsReport`: the barrier per executor, what blocks    |
+//!
+//! # Layout
+//!
+//! | file         | what                                                                  |
+//! |--------------|-----------------------------------------------------------------------|
+//! | `barrier.rs` | [`Barrier`]: the global-step barrier, sans-IO                         |
+//! | `store.rs`   | [`ParamStore`]: the latest weights, versions only move forward        |
+//! | `state.rs`   | [`State`]: barrier + store + counters, messages in, announcements out |
+//! | `config.rs`  | [`ParamServerConfig`] (`[param_server]`)                               |
+//!
+//! Executors fetch weights only when an announcement names a newer version than theirs, so a
+//! late joiner gets the current weights at once and nobody polls.
 #![deny(missing_docs)]
 
 mod barrier;
 mod config;
+mod state;
 mod store;
 
-pub use barrier::{Barrier, BarrierRule, Permit, WaitReason};
-pub use store::{ParamStore, Rejected, StoreCounts};
+use std::time::{Duration, Instant};
 
+pub use barrier::{Barrier, BarrierRule};
 pub use config::ParamServerConfig;
 use node::{Bus, Shutdown};
+use proto::{Role, Topic, topics};
+pub use state::{State, StateCounts};
+pub use store::{ParamStore, Rejected, StoreCounts};
+use zenoh::sample::SampleKind;
 
 /// What the role did, returned when it stops.
 #[derive(Debug, Default, Clone, PartialEq)]
 pub struct Report {
     /// Seconds between start and shutdown.
     pub uptime_s: f64,
+    /// The newest weights version held at shutdown.
+    pub weights_version: u64,
+    /// The global step at shutdown.
+    pub learner_step: u64,
+    /// Counters.
+    pub counts: StateCounts,
+    /// Rejected messages by `<input>/<reason>`.
+    pub rejected: std::collections::BTreeMap<String, u64>,
 }
 
 /// Runs the param-server until `shutdown` fires.
 pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) -> anyhow::Result<Report> {
-    let started = std::time::Instant::now();
+    let started = Instant::now();
+    let session = bus.session().clone();
+    let run = bus.run().clone();
+    let z = node::NodeError::zenoh;
+    let publish_sub = session.declare_subscriber(topics::params_publish(&run)).await.map_err(z)?;
+    let learner_sub = session.declare_subscriber(topics::control_learner(&run)).await.map_err(z)?;
+    let barrier_sub = session.declare_subscriber(topics::control_barrier_all(&run)).await.map_err(z)?;
+    let live_sub = session
+        .liveliness()
+        .declare_subscriber(topics::liveliness_role(&run, Role::Executor))
+        .history(true)
+        .await
+        .map_err(z)?;
+    let weights_key = topics::params_weights(&run);
+    let queryable = session.declare_queryable(&weights_key).await.map_err(z)?;
+    let step_pub = session.declare_publisher(topics::control_step(&run)).express(true).await.map_err(z)?;
+    // Declared last: seeing the token means every input above is in place.
     let _alive = bus.announce().await?;
-    tracing::info!(stats_interval_ms = config.stats_interval_ms, "param-server up");
-    shutdown.wait().await;
+    tracing::info!(rule = ?config.rule(), "param-server up");
+
+    let mut state = State::new(config.rule());
+    let mut latest: Option<zenoh::bytes::ZBytes> = None;
+    let mut announce = tokio::time::interval(Duration::from_millis(config.announce_interval_ms));
+    let mut stats = tokio::time::interval(Duration::from_millis(config.stats_interval_ms));
+    loop {
+        let changed = tokio::select! {
+            _ = shutdown.wait() => break,
+            Ok(sample) = publish_sub.recv_async() => {
+                let accepted = state.on_weights(&sample.payload().to_bytes());
+                if accepted {
+                    // The received frame is exactly what the queryable serves: keep it, no re-encode.
+                    latest = Some(sample.payload().clone());
+                }
+                accepted
+            }
+            Ok(sample) = learner_sub.recv_async() => state.on_learner_step(&sample.payload().to_bytes()),
+            Ok(sample) = barrier_sub.recv_async() => {
+                let id = match Topic::parse(&run, sample.key_expr().as_str()) {
+                    Ok(Topic::ControlBarrier { executor_id }) => Some(executor_id),
+                    _ => None,
+                };
+                state.on_barrier_report(id, &sample.payload().to_bytes());
+                false
+            }
+            Ok(sample) = live_sub.recv_async() => match Topic::parse(&run, sample.key_expr().as_str()) {
+                Ok(Topic::Liveliness(node)) if node.role == Role::Executor => {
+                    state.on_liveliness(node.id, sample.kind() == SampleKind::Put)
+                }
+                _ => false,
+            },
+            Ok(query) = queryable.recv_async() => {
+                let reply = match &latest {
+                    Some(bytes) => query.reply(&weights_key, bytes.clone()).express(true).await,
+                    None => query.reply_err("no weights published yet").await,
+                };
+                if let Err(error) = reply {
+                    tracing::debug!(%error, "weights reply failed");
+                }
+                state.served();
+                false
+            }
+            _ = announce.tick() => true,
+            _ = stats.tick() => {
+                if let Err(error) = bus.put_stats(&state.stats(bus.node(), node::unix_ms())).await {
+                    tracing::debug!(%error, "stats not published");
+                }
+                false
+            }
+        };
+        if changed {
+            let step = state.announcement();
+            if let Err(error) = step_pub.put(proto::encode(&step)).await {
+                tracing::debug!(%error, "announcement not published");
+            }
+        }
+        // The arms above are short, but a flood of reports must not starve the timers.
+        tokio::task::yield_now().await;
+    }
+    let report = Report {
+        uptime_s: started.elapsed().as_secs_f64(),
+        weights_version: state.announcement().weights_version,
+        learner_step: state.announcement().learner_step,
+        counts: state.counts(),
+        rejected: state.rejects().counts().clone(),
+    };
+    drop((publish_sub, learner_sub, barrier_sub, live_sub, queryable, step_pub));
     bus.close().await?;
-    Ok(Report { uptime_s: started.elapsed().as_secs_f64() })
+    Ok(report)
 }

@@ -24,7 +24,7 @@ use crate::error::{DecodeError, ValidationError};
 /// First two bytes of every frame.
 pub const MAGIC: [u8; 2] = *b"SL";
 /// Wire format version; bump on any change to the frame or to any message's fields.
-pub const FORMAT_VERSION: u16 = 1;
+pub const FORMAT_VERSION: u16 = 2;
 /// Bytes before the payload.
 pub const HEADER_LEN: usize = 13;
 /// Largest payload accepted, and the bincode allocation limit while parsing one.
@@ -61,11 +61,15 @@ pub enum MessageKind {
     EpisodeReport = 8,
     /// [`crate::StatsReport`].
     StatsReport = 9,
+    /// [`crate::LearnerStep`].
+    LearnerStep = 10,
+    /// [`crate::EvalReport`].
+    EvalReport = 11,
 }
 
 impl MessageKind {
     /// Every kind, in wire-byte order.
-    pub const ALL: [MessageKind; 9] = [
+    pub const ALL: [MessageKind; 11] = [
         MessageKind::ExperienceBatch,
         MessageKind::SampleRequest,
         MessageKind::SampleReply,
@@ -75,6 +79,8 @@ impl MessageKind {
         MessageKind::BarrierReport,
         MessageKind::EpisodeReport,
         MessageKind::StatsReport,
+        MessageKind::LearnerStep,
+        MessageKind::EvalReport,
     ];
 
     /// The kind with this wire byte, if any.
@@ -201,7 +207,14 @@ mod tests {
     use crate::{GlobalStep, SampleRequest};
 
     fn step() -> GlobalStep {
-        GlobalStep { learner_step: 300, weights_version: 200, max_env_steps_ahead: 1000 }
+        GlobalStep {
+            learner_step: 300,
+            weights_version: 200,
+            env_steps_per_learner_step: 1,
+            warm_up_share: 1000,
+            min_weights_version: 0,
+            live_executors: 8,
+        }
     }
 
     /// Replaces the payload of `frame` and fixes up length and checksum, so bincode and validation see it.
@@ -231,7 +244,7 @@ mod tests {
             assert_eq!(MessageKind::from_u8(kind as u8), Some(kind));
         }
         assert_eq!(MessageKind::from_u8(0), None);
-        assert_eq!(MessageKind::from_u8(10), None);
+        assert_eq!(MessageKind::from_u8(12), None);
     }
 
     #[test]
@@ -288,10 +301,10 @@ mod tests {
 
     #[test]
     fn checksummed_invalid_contents_fail_validation() {
-        let zero_k = GlobalStep { max_env_steps_ahead: 0, ..step() };
+        let zero_k = GlobalStep { env_steps_per_learner_step: 0, ..step() };
         assert_eq!(
             decode::<GlobalStep>(&encode(&zero_k)),
-            Err(DecodeError::Invalid(ValidationError::Zero { field: "max_env_steps_ahead" }))
+            Err(DecodeError::Invalid(ValidationError::Zero { field: "env_steps_per_learner_step" }))
         );
     }
 }

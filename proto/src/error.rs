@@ -72,6 +72,31 @@ pub enum DecodeError {
     Invalid(#[from] ValidationError),
 }
 
+impl DecodeError {
+    /// A short, stable name for the failure, for counters on monitoring topics (`checksum`, `dims`).
+    pub fn reason(&self) -> &'static str {
+        match self {
+            DecodeError::TooShort { .. } => "truncated",
+            DecodeError::BadMagic { .. } => "bad_magic",
+            DecodeError::UnsupportedVersion { .. } => "bad_version",
+            DecodeError::UnknownKind(_) | DecodeError::WrongKind { .. } => "wrong_kind",
+            DecodeError::PayloadTooLarge { .. } => "too_large",
+            DecodeError::TrailingBytes { .. } => "trailing_bytes",
+            DecodeError::ChecksumMismatch { .. } => "checksum",
+            DecodeError::Malformed(_) => "malformed",
+            DecodeError::Invalid(invalid) => match invalid {
+                ValidationError::NonFinite { .. } => "non_finite",
+                ValidationError::Negative { .. } => "negative",
+                ValidationError::BadDimension { .. } => "dims",
+                ValidationError::LengthMismatch { .. } => "length",
+                ValidationError::Empty { .. } => "empty",
+                ValidationError::TooLarge { .. } => "too_large",
+                ValidationError::Zero { .. } | ValidationError::BadText { .. } => "invalid",
+            },
+        }
+    }
+}
+
 /// Why a message's contents break the wire contract; returned by [`crate::Message::validate`].
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ValidationError {

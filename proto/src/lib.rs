@@ -12,8 +12,10 @@
 //! | `replay/priorities`              | [`PriorityUpdate`]                    | learner                | replay server                     |
 //! | `params/publish`                 | [`WeightsSnapshot`]                   | learner                | param server                      |
 //! | `params/weights` (+ queryable)   | [`WeightsSnapshot`]                   | param server           | executors                         |
-//! | `control/step`                   | [`GlobalStep`]                        | learner / param server | executors, replay server, monitor |
-//! | `control/barrier/<executor_id>`  | [`BarrierReport`]                     | executor               | learner, monitor                  |
+//! | `control/learner`                | [`LearnerStep`]                       | learner                | param server                      |
+//! | `control/step`                   | [`GlobalStep`]                        | param server           | executors, monitor                |
+//! | `control/barrier/<executor_id>`  | [`BarrierReport`]                     | executor               | param server, monitor             |
+//! | `eval`                           | [`EvalReport`]                        | learner                | monitor                           |
 //! | `stats/<role>/<id>`              | [`StatsReport`]                       | every process          | monitor (`stats/**`)              |
 //! | `episodes/<executor_id>`         | [`EpisodeReport`]                     | executor               | monitor (`episodes/*`)            |
 //! | `liveliness/<role>/<id>`         | zenoh liveliness token, no payload    | every process          | barrier, monitor                  |
@@ -36,7 +38,15 @@
 //!
 //! let run = RunId::new("ant-seed0")?;
 //! assert_eq!(topics::control_step(&run), "rl/ant-seed0/control/step");
-//! let step = GlobalStep { learner_step: 1000, weights_version: 1000, max_env_steps_ahead: 5000 };
+//! let step = GlobalStep {
+//!     learner_step: 1000,
+//!     weights_version: 1000,
+//!     env_steps_per_learner_step: 1,
+//!     warm_up_share: 1250,
+//!     min_weights_version: 0,
+//!     live_executors: 8,
+//! };
+//! assert_eq!(step.allowance(0), 2250);
 //! let bytes = encode(&step);
 //! assert_eq!(decode::<GlobalStep>(&bytes)?, step);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
@@ -56,7 +66,7 @@ pub mod topics;
 
 pub use check::{MAX_BATCH_LEN, MAX_DIM, MAX_NAME_LEN, MAX_STATS_ENTRIES, MAX_TEXT_LEN};
 pub use codec::{FORMAT_VERSION, Message, MessageKind, decode, encode, peek_kind};
-pub use control::{BarrierReport, GlobalStep};
+pub use control::{BarrierReport, EvalReport, GlobalStep, LearnerStep};
 pub use error::{DecodeError, Result, TopicError, ValidationError};
 pub use experience::{ExperienceBatch, Transition, Transitions};
 pub use params::WeightsSnapshot;

@@ -129,6 +129,10 @@ pub enum Topic {
     ParamsPublish,
     /// `control/step`: [`crate::GlobalStep`] announcements.
     ControlStep,
+    /// `control/learner`: [`crate::LearnerStep`], learner → param server.
+    ControlLearner,
+    /// `eval`: [`crate::EvalReport`] from the learner's evaluations.
+    Evaluation,
     /// `control/barrier/<executor_id>`: [`crate::BarrierReport`] from one executor.
     ControlBarrier {
         /// The reporting executor.
@@ -155,6 +159,8 @@ impl Topic {
             Topic::ParamsWeights => "params/weights".to_string(),
             Topic::ParamsPublish => "params/publish".to_string(),
             Topic::ControlStep => "control/step".to_string(),
+            Topic::ControlLearner => "control/learner".to_string(),
+            Topic::Evaluation => "eval".to_string(),
             Topic::ControlBarrier { executor_id } => format!("control/barrier/{executor_id}"),
             Topic::Stats(node) => format!("stats/{}/{}", node.role, node.id),
             Topic::Episodes { executor_id } => format!("episodes/{executor_id}"),
@@ -175,6 +181,8 @@ impl Topic {
             ["params", "weights"] => Topic::ParamsWeights,
             ["params", "publish"] => Topic::ParamsPublish,
             ["control", "step"] => Topic::ControlStep,
+            ["control", "learner"] => Topic::ControlLearner,
+            ["eval"] => Topic::Evaluation,
             ["control", "barrier", id] => Topic::ControlBarrier { executor_id: parse_id(id)? },
             ["stats", role, id] => Topic::Stats(NodeId { role: role.parse()?, id: parse_id(id)? }),
             ["episodes", id] => Topic::Episodes { executor_id: parse_id(id)? },
@@ -241,6 +249,16 @@ pub fn params_publish(run: &RunId) -> String {
 /// `rl/<run>/control/step`: global-step announcements.
 pub fn control_step(run: &RunId) -> String {
     Topic::ControlStep.key(run)
+}
+
+/// `rl/<run>/control/learner`: the learner's progress, for the param server.
+pub fn control_learner(run: &RunId) -> String {
+    Topic::ControlLearner.key(run)
+}
+
+/// `rl/<run>/eval`: the learner's evaluation results.
+pub fn evaluation(run: &RunId) -> String {
+    Topic::Evaluation.key(run)
 }
 
 /// `rl/<run>/control/barrier/<executor_id>`: one executor's barrier report.
@@ -322,6 +340,8 @@ mod tests {
         assert_eq!(params_weights(&r), "rl/ant-2026-01/params/weights");
         assert_eq!(params_publish(&r), "rl/ant-2026-01/params/publish");
         assert_eq!(control_step(&r), "rl/ant-2026-01/control/step");
+        assert_eq!(control_learner(&r), "rl/ant-2026-01/control/learner");
+        assert_eq!(evaluation(&r), "rl/ant-2026-01/eval");
         assert_eq!(control_barrier(&r, 2), "rl/ant-2026-01/control/barrier/2");
         assert_eq!(control_barrier_all(&r), "rl/ant-2026-01/control/barrier/*");
         assert_eq!(stats(&r, exec), "rl/ant-2026-01/stats/executor/3");
@@ -346,6 +366,8 @@ mod tests {
             Topic::ParamsWeights,
             Topic::ParamsPublish,
             Topic::ControlStep,
+            Topic::ControlLearner,
+            Topic::Evaluation,
             Topic::ControlBarrier { executor_id: 12 },
             Topic::Episodes { executor_id: 5 },
         ];

@@ -5,9 +5,10 @@ use std::fmt::Debug;
 
 use proto::codec::HEADER_LEN;
 use proto::{
-    BarrierReport, BlockedReason, DecodeError, EpisodeReport, ExperienceBatch, GlobalStep, Message,
-    MessageKind, NodeId, PriorityUpdate, RefusalReason, RejectCount, Role, SampleRefusal, SampleReply,
-    SampleRequest, SampledBatch, StatsReport, Transitions, ValidationError, WeightsSnapshot, decode, encode,
+    BarrierReport, BlockedReason, DecodeError, EpisodeReport, EvalReport, ExperienceBatch, GlobalStep,
+    LearnerStep, Message, MessageKind, NodeId, PriorityUpdate, RefusalReason, RejectCount, Role,
+    SampleRefusal, SampleReply, SampleRequest, SampledBatch, StatsReport, Transitions, ValidationError,
+    WeightsSnapshot, decode, encode,
 };
 
 /// Deterministic data without a `rand` dependency (xorshift64*).
@@ -217,11 +218,26 @@ fn weights_snapshot() {
 
 #[test]
 fn control_messages() {
-    check_message(&GlobalStep { learner_step: 10, weights_version: 8, max_env_steps_ahead: 1000 }, 1);
+    let step = GlobalStep {
+        learner_step: 10,
+        weights_version: 8,
+        env_steps_per_learner_step: 1,
+        warm_up_share: 1250,
+        min_weights_version: 0,
+        live_executors: 8,
+    };
+    check_message(&step, 1);
+    check_message(&LearnerStep { learner_step: 10, weights_version: 8 }, 1);
+    let eval =
+        EvalReport { epoch: 3, learner_step: 3000, episodes: 1, mean_return: 812.5, mean_length: 1000.0 };
+    check_message(&eval, 1);
+    assert!(EvalReport { mean_return: f64::NAN, ..eval }.validate().is_err());
     let barrier = BarrierReport {
         executor_id: 2,
         env_steps: 50_000,
+        allowed_env_steps: 50_001,
         learner_step_seen: 49,
+        joined_at: 0,
         weights_version: 40,
         blocked: true,
         blocked_ms_total: 1234,

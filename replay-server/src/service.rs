@@ -202,7 +202,7 @@ impl Service {
 
     /// Counts and logs a rejection.
     pub fn reject(&mut self, rejection: &Rejection, now: Instant) {
-        self.rejects.record(rejection, now);
+        self.rejects.record(&rejection.key(), &rejection.detail, now);
     }
 
     /// Refuses an experience payload too large to be one of ours, before spending time decoding it.
@@ -413,7 +413,7 @@ impl Service {
     }
 
     fn rejected(&mut self, rejection: Rejection, now: Instant) -> Rejection {
-        self.rejects.record(&rejection, now);
+        self.rejects.record(&rejection.key(), &rejection.detail, now);
         rejection
     }
 }

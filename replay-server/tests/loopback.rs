@@ -374,7 +374,14 @@ async fn a_flood_of_malformed_messages_leaves_it_serving_correct_batches() {
             }
             1 => (good[..rng.random_range(0..good.len())].to_vec(), "experience/truncated"),
             2 => {
-                let step = GlobalStep { learner_step: 1, weights_version: 1, max_env_steps_ahead: 1 };
+                let step = GlobalStep {
+                    learner_step: 1,
+                    weights_version: 1,
+                    env_steps_per_learner_step: 1,
+                    warm_up_share: 0,
+                    min_weights_version: 0,
+                    live_executors: 1,
+                };
                 (proto::encode(&step), "experience/wrong_kind")
             }
             3 => {

@@ -1,1 +1,296 @@
-//! Placeholder: filled in by its issue.
+//! The in-process cluster harness: every role's `run` in one process, each on its own zenoh peer
+//! session over loopback (the replay server listens on a free port, the others connect to it and
+//! find each other by gossip), with the real Ant and tiny networks. Readiness is a liveliness token,
+//! never a sleep; every wait has a deadline. acme's `test_mt` and raft-rs's `harness/`, in Rust.
+//!
+//! ```no_run
+//! # async fn demo() -> anyhow::Result<()> {
+//! let mut cluster = cluster::Cluster::start(cluster::Spec::tiny("demo", 2)).await?;
+//! cluster.wait_for_learner_step(100).await?;
+//! let reports = cluster.stop().await?;
+//! assert!(reports.learner.updater.final_step >= 100);
+//! # Ok(()) }
+//! ```
+
+use std::collections::BTreeMap;
+use std::future::Future;
+use std::time::Duration;
+
+use anyhow::{Context, Result, anyhow, bail};
+use node::{Bus, BusConfig, RoleConfig, Shutdown, ShutdownTrigger};
+use proto::{GlobalStep, LearnerStep, NodeId, Role, RunId, topics};
+use tokio::task::JoinHandle;
+
+/// The longest any single wait of the harness may take.
+pub const WAIT: Duration = Duration::from_secs(120);
+
+/// Awaits `f`, or fails with what was awaited after `limit`.
+pub async fn within<T>(what: &str, limit: Duration, f: impl Future<Output = T>) -> Result<T> {
+    tokio::time::timeout(limit, f).await.map_err(|_| anyhow!("timed out after {limit:?} waiting for {what}"))
+}
+
+/// A free loopback port (bound, read, released: the replay server binds it right after).
+pub fn free_port() -> Result<u16> {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0")?;
+    Ok(listener.local_addr()?.port())
+}
+
+/// What to start.
+#[derive(Debug, Clone)]
+pub struct Spec {
+    /// The run id.
+    pub run_id: String,
+    /// Executors started with the cluster (ids 0..n).
+    pub executors: u32,
+    /// The run file, TOML; every role reads its tables from it.
+    pub config: String,
+}
+
+impl Spec {
+    /// Tiny networks on the real Ant, short episodes, a small replay minimum, frequent weights.
+    pub fn tiny(run_id: &str, executors: u32) -> Spec {
+        let config = r#"
+[train]
+task = "ant-v5"
+seed = 3
+
+[agent]
+critic_hidden = [16]
+embedding_layers = [16, 4]
+coupling_hidden = [4]
+batch_size = 32
+
+[replay_server]
+min_size_to_sample = 200
+request_deadline_ms = 500
+stats_interval_ms = 200
+[replay_server.buffer]
+capacity_transitions = 20000
+memory_budget_bytes = 268435456
+
+[param_server]
+warm_up_transitions = 300
+env_steps_per_learner_step = 1
+announce_interval_ms = 100
+stats_interval_ms = 200
+
+[learner]
+prefetch_batches = 2
+publish_weights_every_updates = 25
+announce_every_updates = 1
+epoch_length_updates = 100
+eval_episodes = 1
+stats_interval_ms = 200
+
+[executor]
+batch_transitions = 16
+max_episode_steps = 60
+report_interval_ms = 50
+stats_interval_ms = 200
+"#;
+        Spec { run_id: run_id.into(), executors, config: config.into() }
+    }
+}
+
+/// Parses and validates role config `C` from a run file's text.
+pub fn role_config<C: RoleConfig>(text: &str) -> Result<C> {
+    let config = C::parse(text).map_err(|e| anyhow!("[{}]: {e}", C::SECTION))?;
+    config.validate().map_err(|e| anyhow!("[{}] invalid: {e}", C::SECTION))?;
+    Ok(config)
+}
+
+/// One running role.
+#[derive(Debug)]
+pub struct Running<R> {
+    trigger: ShutdownTrigger,
+    task: JoinHandle<Result<R>>,
+}
+
+impl<R> Running<R> {
+    async fn stop(self, what: &str) -> Result<R> {
+        self.trigger.fire();
+        within(what, WAIT, self.task).await?.with_context(|| format!("{what} panicked"))?
+    }
+}
+
+/// What every role returned.
+#[derive(Debug)]
+pub struct Reports {
+    /// The replay server's.
+    pub replay: replay_server::Report,
+    /// The param server's.
+    pub param: param_server::Report,
+    /// The learner's.
+    pub learner: learner::Report,
+    /// Each executor still running at the end, by id.
+    pub executors: BTreeMap<u32, executor::Report>,
+}
+
+/// A running cluster.
+#[derive(Debug)]
+pub struct Cluster {
+    run: RunId,
+    endpoint: String,
+    config: String,
+    /// A session of the harness's own, for watching the run's topics.
+    pub observer: Bus,
+    replay: Running<replay_server::Report>,
+    param: Running<param_server::Report>,
+    learner: Running<learner::Report>,
+    executors: BTreeMap<u32, Running<executor::Report>>,
+}
+
+async fn open(run: &RunId, role: Role, id: u32, config: &BusConfig) -> Result<Bus> {
+    Bus::open(run.clone(), NodeId { role, id }, config).await.with_context(|| format!("opening {role} {id}"))
+}
+
+impl Cluster {
+    /// Starts the replay server, param server, learner and `spec.executors` executors; returns once
+    /// each has declared its liveliness token.
+    pub async fn start(spec: Spec) -> Result<Cluster> {
+        let run = RunId::new(spec.run_id.clone())?;
+        let endpoint = format!("tcp/127.0.0.1:{}", free_port()?);
+        let server = BusConfig { listen: vec![endpoint.clone()], ..BusConfig::default() };
+        let peer = BusConfig::loopback(vec![endpoint.clone()]);
+        let replay_bus = open(&run, Role::Replay, 0, &server).await?;
+        let replay_config = role_config(&spec.config)?;
+        let replay = spawn(|s| replay_server::run(replay_config, replay_bus, s));
+        let observer = open(&run, Role::Learner, 9999, &peer).await?;
+        let param_bus = open(&run, Role::Param, 0, &peer).await?;
+        let param_config = role_config(&spec.config)?;
+        let param = spawn(|s| param_server::run(param_config, param_bus, s));
+        let learner_bus = open(&run, Role::Learner, 0, &peer).await?;
+        let learner_config = role_config(&spec.config)?;
+        let learner = spawn(|s| learner::run(learner_config, learner_bus, s));
+        let mut cluster = Cluster {
+            run,
+            endpoint,
+            config: spec.config,
+            observer,
+            replay,
+            param,
+            learner,
+            executors: BTreeMap::new(),
+        };
+        for (role, id) in [(Role::Replay, 0), (Role::Param, 0), (Role::Learner, 0)] {
+            cluster.wait_alive(NodeId { role, id }).await?;
+        }
+        for id in 0..spec.executors {
+            cluster.start_executor(id).await?;
+        }
+        Ok(cluster)
+    }
+
+    /// The run id.
+    pub fn run(&self) -> &RunId {
+        &self.run
+    }
+
+    /// Starts executor `id` (a late joiner if the run is under way); returns once it is alive.
+    pub async fn start_executor(&mut self, id: u32) -> Result<()> {
+        if self.executors.contains_key(&id) {
+            bail!("executor {id} is already running");
+        }
+        let bus =
+            open(&self.run, Role::Executor, id, &BusConfig::loopback(vec![self.endpoint.clone()])).await?;
+        let config = role_config(&self.config)?;
+        let running = spawn(|s| executor::run(config, bus, s));
+        self.executors.insert(id, running);
+        self.wait_alive(NodeId { role: Role::Executor, id }).await
+    }
+
+    /// Kills executor `id` without a clean shutdown: its task is aborted mid-step, its session
+    /// dropped, so its liveliness token vanishes as a crashed process's would.
+    pub async fn kill_executor(&mut self, id: u32) -> Result<()> {
+        let running = self.executors.remove(&id).ok_or_else(|| anyhow!("no executor {id}"))?;
+        running.task.abort();
+        let _ = within("the killed executor's task", WAIT, running.task).await?;
+        std::mem::forget(running.trigger); // dropping it would fire a clean shutdown signal
+        Ok(())
+    }
+
+    /// Waits until `node`'s liveliness token is visible.
+    pub async fn wait_alive(&self, node: NodeId) -> Result<()> {
+        let key = topics::liveliness(&self.run, node);
+        let session = self.observer.session();
+        within(&format!("{} {} to be alive", node.role, node.id), WAIT, async {
+            loop {
+                if let Ok(replies) = session.liveliness().get(&key).timeout(Duration::from_secs(1)).await
+                    && replies.recv_async().await.is_ok()
+                {
+                    return;
+                }
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+        })
+        .await
+    }
+
+    /// Waits until the learner reports a step of at least `step` on `control/learner`.
+    pub async fn wait_for_learner_step(&self, step: u64) -> Result<u64> {
+        let sub = self
+            .observer
+            .session()
+            .declare_subscriber(topics::control_learner(&self.run))
+            .await
+            .map_err(node::NodeError::zenoh)?;
+        within(&format!("learner step {step}"), WAIT, async {
+            loop {
+                let sample = sub.recv_async().await.map_err(|e| anyhow!("{e}"))?;
+                if let Ok(s) = proto::decode::<LearnerStep>(&sample.payload().to_bytes())
+                    && s.learner_step >= step
+                {
+                    return Ok(s.learner_step);
+                }
+            }
+        })
+        .await?
+    }
+
+    /// Waits until a `control/step` announcement satisfies `pred`; returns it.
+    pub async fn wait_for_global_step(
+        &self,
+        what: &str,
+        pred: impl Fn(&GlobalStep) -> bool,
+    ) -> Result<GlobalStep> {
+        let sub = self
+            .observer
+            .session()
+            .declare_subscriber(topics::control_step(&self.run))
+            .await
+            .map_err(node::NodeError::zenoh)?;
+        within(what, WAIT, async {
+            loop {
+                let sample = sub.recv_async().await.map_err(|e| anyhow!("{e}"))?;
+                if let Ok(s) = proto::decode::<GlobalStep>(&sample.payload().to_bytes())
+                    && pred(&s)
+                {
+                    return Ok(s);
+                }
+            }
+        })
+        .await?
+    }
+
+    /// Stops every role (executors first, the replay server last) and returns their reports.
+    pub async fn stop(self) -> Result<Reports> {
+        let mut executors = BTreeMap::new();
+        for (id, running) in self.executors {
+            executors.insert(id, running.stop(&format!("executor {id} to stop")).await?);
+        }
+        let learner = self.learner.stop("the learner to stop").await?;
+        let param = self.param.stop("the param server to stop").await?;
+        let replay = self.replay.stop("the replay server to stop").await?;
+        Ok(Reports { replay, param, learner, executors })
+    }
+}
+
+fn spawn<R, F, Fut>(f: F) -> Running<R>
+where
+    F: FnOnce(Shutdown) -> Fut,
+    Fut: Future<Output = Result<R>> + Send + 'static,
+    R: Send + 'static,
+{
+    let (trigger, shutdown) = Shutdown::new();
+    Running { trigger, task: tokio::spawn(f(shutdown)) }
+}

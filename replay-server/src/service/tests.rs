@@ -161,7 +161,14 @@ fn bad_input_is_counted_by_reason_and_changes_nothing() {
         })
         .unwrap();
     wrong_dims.td_errors = vec![0.0];
-    let step = GlobalStep { learner_step: 1, weights_version: 1, max_env_steps_ahead: 1 };
+    let step = GlobalStep {
+        learner_step: 1,
+        weights_version: 1,
+        env_steps_per_learner_step: 1,
+        warm_up_share: 0,
+        min_weights_version: 0,
+        live_executors: 1,
+    };
     let cases: Vec<(Vec<u8>, &str)> = vec![
         (vec![1, 2, 3], "experience/truncated"),
         (vec![0xAB; 64], "experience/bad_magic"),

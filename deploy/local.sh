@@ -1,0 +1,95 @@
+#!/usr/bin/env bash
+# The distributed run on one machine: param server, replay server, learner, N executors and a
+# monitor, under one run id and one run file, each process logging to runs/<run-id>/<role>.log.
+#
+#   deploy/local.sh [N] [RUN_FILE]        N executors (default 8), run file (default deploy/configs/ant-v5.toml)
+#
+# Environment: RUN_ID (default local-<time>; reuse one to resume its learner checkpoint), PORT (the
+# replay server's, default 7447), MINUTES (stop cleanly after that long; default: until Ctrl-C),
+# EXECUTOR_NICE (default 10: executors yield the CPU to the learner, whose updates/s decide the
+# run), BUILD=0 (skip `cargo build`).
+# Ctrl-C or TERM stops exactly this script's children, cleanly (each writes its report), within 30 s.
+# If any role dies, the others are stopped and the script exits non-zero naming it.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+
+n=${1:-8}
+config=${2:-deploy/configs/ant-v5.toml}
+[[ $n =~ ^[0-9]+$ && $n -ge 1 ]] || { echo "local.sh: N must be a positive integer, got '$n'" >&2; exit 2; }
+[[ -f $config ]] || { echo "local.sh: no run file $config" >&2; exit 2; }
+run_id=${RUN_ID:-local-$(date +%Y%m%d-%H%M%S)}
+port=${PORT:-7447}
+nice_level=${EXECUTOR_NICE:-10}
+dir="runs/$run_id"
+mkdir -p "$dir"
+
+./deploy/setup.sh
+if [[ ${BUILD:-1} != 0 ]]; then
+    cargo build --release -p replay-server -p param-server -p learner -p executor -p sac-lsp-cli
+fi
+bin=target/release
+hub="tcp/127.0.0.1:$port"
+common=(--run-id "$run_id" --config "$config")
+peer=(--connect "$hub" --listen tcp/127.0.0.1:0)
+export SACLSP_CHECKPOINT_DIR="$dir/checkpoints"
+
+declare -A names=()
+pids=()
+start() { # name, command...
+    local name=$1
+    shift
+    "$@" >"$dir/$name.log" 2>&1 &
+    pids+=($!)
+    names[$!]=$name
+}
+
+stopping=0
+stop_all() {
+    stopping=1
+    local live=()
+    for pid in "${pids[@]}"; do kill -0 "$pid" 2>/dev/null && live+=("$pid"); done
+    [[ ${#live[@]} -gt 0 ]] || return 0
+    kill -TERM "${live[@]}" 2>/dev/null || true
+    for _ in $(seq 300); do
+        local any=0
+        for pid in "${live[@]}"; do kill -0 "$pid" 2>/dev/null && any=1; done
+        [[ $any == 0 ]] && return 0
+        sleep 0.1
+    done
+    echo "local.sh: some roles did not stop within 30 s; killing them" >&2
+    kill -KILL "${live[@]}" 2>/dev/null || true
+}
+trap 'echo "local.sh: stopping $run_id" >&2; stop_all; exit 130' INT TERM
+
+echo "local.sh: run $run_id, $n executors, run file $config, logs in $dir/" >&2
+start replay-server "$bin/replay-server" "${common[@]}" --listen "$hub"
+start param-server "$bin/param-server" "${common[@]}" "${peer[@]}"
+start learner "$bin/learner" "${common[@]}" "${peer[@]}"
+for ((i = 0; i < n; i++)); do
+    start "executor-$i" nice -n "$nice_level" "$bin/executor" "${common[@]}" --id "$i" "${peer[@]}"
+done
+start monitor "$bin/sac-lsp" monitor --run-id "$run_id" "${peer[@]}" --out "$dir/monitor.jsonl" --quiet
+echo "local.sh: live view: $bin/sac-lsp monitor --run-id $run_id --connect $hub --out $dir/view.jsonl" >&2
+
+deadline=""
+[[ -n ${MINUTES:-} ]] && deadline=$(($(date +%s) + ${MINUTES%.*} * 60))
+while true; do
+    for pid in "${pids[@]}"; do
+        if ! kill -0 "$pid" 2>/dev/null; then
+            status=0
+            wait "$pid" || status=$?
+            echo "local.sh: ${names[$pid]} (pid $pid) exited with status $status; see $dir/${names[$pid]}.log" >&2
+            tail -n 5 "$dir/${names[$pid]}.log" >&2 || true
+            stop_all
+            [[ ${names[$pid]} == learner && $status == 0 ]] && exit 0 # max_updates reached
+            exit 1
+        fi
+    done
+    if [[ -n $deadline && $(date +%s) -ge $deadline ]]; then
+        echo "local.sh: $MINUTES minutes are up; stopping $run_id" >&2
+        stop_all
+        [[ -x $bin/sac-lsp ]] && "$bin/sac-lsp" plot --input "$dir/monitor.jsonl" --out-dir "$dir" || true
+        exit 0
+    fi
+    sleep 1
+done

@@ -1,0 +1,241 @@
+//! The rollout, sans-IO: one environment, the acting policy and critics, and the transitions not
+//! yet published. [`Rollout::step`] is one env step with the stochastic policy; [`Rollout::flush`]
+//! turns the pending transitions into an [`ExperienceBatch`] with each transition's initial
+//! priority |δ| from the local critics (Ape-X; the same formula the learner's updates use).
+
+use agent::{Actor, Batch, Mode, ParamSnapshot};
+use proto::{EpisodeReport, ExperienceBatch, Transition, Transitions};
+use sim::Environment;
+
+/// What one step produced besides the stored transition.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepOutcome {
+    /// The episode that this step finished, if it did.
+    pub episode: Option<EpisodeReport>,
+    /// The step produced a non-finite observation or reward: it was dropped and the episode reset.
+    pub dropped_non_finite: bool,
+}
+
+/// An executor's environment and policy.
+pub struct Rollout {
+    executor_id: u32,
+    env: Box<dyn Environment>,
+    actor: Actor,
+    observation: Vec<f32>,
+    pending: Transitions,
+    episode: u64,
+    episode_return: f64,
+    episode_length: u32,
+    env_steps: u64,
+    seq: u64,
+    /// Episodes are cut (as truncated) at this length: the task's limit or a shorter one.
+    episode_limit: u32,
+}
+
+impl std::fmt::Debug for Rollout {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Rollout")
+            .field("executor_id", &self.executor_id)
+            .field("env_steps", &self.env_steps)
+            .finish()
+    }
+}
+
+fn to_f32(values: &[f64]) -> Vec<f32> {
+    values.iter().map(|v| *v as f32).collect()
+}
+
+impl Rollout {
+    /// A rollout of `env` with `actor`; the first episode starts now, from `reset_seed`.
+    pub fn new(executor_id: u32, mut env: Box<dyn Environment>, actor: Actor, reset_seed: u64) -> Self {
+        let spec = env.spec().clone();
+        let observation = to_f32(&env.reset(Some(reset_seed)));
+        let pending = Transitions::with_capacity(spec.obs_dim as u32, spec.act_dim as u32, 64);
+        Self {
+            executor_id,
+            env,
+            actor,
+            observation,
+            pending,
+            episode: 0,
+            episode_return: 0.0,
+            episode_length: 0,
+            env_steps: 0,
+            seq: 0,
+            episode_limit: spec.max_episode_steps,
+        }
+    }
+
+    /// Cuts episodes at `limit` steps if that is shorter than the task's own limit (short episodes
+    /// for tests and quick runs; a cut is a truncation, so the value of the next state still counts).
+    pub fn with_episode_limit(mut self, limit: Option<u32>) -> Self {
+        if let Some(limit) = limit {
+            self.episode_limit = self.episode_limit.min(limit.max(1));
+        }
+        self
+    }
+
+    /// Cumulative env steps taken (dropped non-finite steps included: they cost a step too).
+    pub fn env_steps(&self) -> u64 {
+        self.env_steps
+    }
+
+    /// Transitions waiting to be published.
+    pub fn pending(&self) -> usize {
+        self.pending.len()
+    }
+
+    /// The loaded weights' version, `None` before the first load.
+    pub fn weights_version(&self) -> Option<u64> {
+        self.actor.version()
+    }
+
+    /// Loads new weights into the policy and critics.
+    pub fn load(&mut self, snapshot: &ParamSnapshot) -> agent::Result<()> {
+        self.actor.load(snapshot)
+    }
+
+    /// One env step with the stochastic policy. The transition joins the pending batch unless its
+    /// numbers are not finite (then the episode is reset and the step reported as dropped).
+    pub fn step(&mut self) -> anyhow::Result<StepOutcome> {
+        let act = self.actor.act(&self.observation, Mode::Explore)?;
+        let action = self.env.spec().action_from_unit(&act.env_action);
+        let step = self.env.step(&action)?;
+        self.env_steps += 1;
+        let next_observation = to_f32(&step.observation);
+        let reward = step.reward as f32;
+        let finite = reward.is_finite() && next_observation.iter().all(|v| v.is_finite());
+        if !finite {
+            // MuJoCo blew up; a NaN in one transition would make the replay server reject the batch.
+            self.reset_episode();
+            return Ok(StepOutcome { episode: None, dropped_non_finite: true });
+        }
+        self.pending.push(Transition {
+            observation: &self.observation,
+            action: &act.action,
+            reward,
+            next_observation: &next_observation,
+            // Only a true termination stops bootstrapping; the time limit does not.
+            terminated: step.terminated,
+        })?;
+        self.episode_return += step.reward;
+        self.episode_length += 1;
+        let truncated = step.truncated || self.episode_length >= self.episode_limit;
+        if step.terminated || truncated {
+            let report = EpisodeReport {
+                executor_id: self.executor_id,
+                episode: self.episode,
+                episode_return: self.episode_return,
+                length: self.episode_length,
+                terminated: step.terminated,
+                env_steps: self.env_steps,
+                weights_version: self.actor.version().unwrap_or(0),
+            };
+            self.reset_episode();
+            Ok(StepOutcome { episode: Some(report), dropped_non_finite: false })
+        } else {
+            self.observation = next_observation;
+            Ok(StepOutcome { episode: None, dropped_non_finite: false })
+        }
+    }
+
+    fn reset_episode(&mut self) {
+        self.episode += 1;
+        self.episode_return = 0.0;
+        self.episode_length = 0;
+        self.observation = to_f32(&self.env.reset(None));
+    }
+
+    /// The pending transitions as one batch with their initial priorities, or `None` if there are none.
+    pub fn flush(&mut self) -> anyhow::Result<Option<ExperienceBatch>> {
+        if self.pending.is_empty() {
+            return Ok(None);
+        }
+        let spec = self.env.spec();
+        let capacity = self.pending.len();
+        let transitions = std::mem::replace(
+            &mut self.pending,
+            Transitions::with_capacity(spec.obs_dim as u32, spec.act_dim as u32, capacity),
+        );
+        let batch = Batch {
+            size: transitions.len(),
+            observations: transitions.observations.clone(),
+            actions: transitions.actions.clone(),
+            rewards: transitions.rewards.clone(),
+            next_observations: transitions.next_observations.clone(),
+            terminated: transitions.terminated.iter().map(|&d| if d { 1.0 } else { 0.0 }).collect(),
+            is_weights: None,
+        };
+        let td_errors = self.actor.td_errors(&batch)?.iter().map(|d| d.abs()).collect();
+        let experience = ExperienceBatch {
+            executor_id: self.executor_id,
+            seq: self.seq,
+            weights_version: self.actor.version().unwrap_or(0),
+            env_steps: self.env_steps,
+            transitions,
+            td_errors,
+        };
+        self.seq += 1;
+        Ok(Some(experience))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use agent::{AgentConfig, Learner};
+    use proto::Message;
+    use sim::Task;
+
+    use super::*;
+
+    fn rollout() -> (Rollout, Learner) {
+        let env = Task::InvertedPendulum.make(3).unwrap();
+        let cfg = AgentConfig {
+            critic_hidden: vec![8],
+            embedding_layers: vec![8, 2],
+            ..AgentConfig::for_task(env.spec().obs_dim, env.spec().act_dim)
+        };
+        let learner = Learner::new(cfg.clone(), 1).unwrap();
+        let mut actor = Actor::new(cfg, 2).unwrap();
+        actor.load(&learner.snapshot().unwrap()).unwrap();
+        (Rollout::new(7, env, actor, 3), learner)
+    }
+
+    #[test]
+    fn steps_fill_batches_with_the_learners_td_errors() {
+        let (mut r, learner) = rollout();
+        let mut episodes = Vec::new();
+        for _ in 0..200 {
+            if let Some(ep) = r.step().unwrap().episode {
+                episodes.push(ep);
+            }
+        }
+        assert_eq!(r.env_steps(), 200);
+        let batch = r.flush().unwrap().unwrap();
+        assert_eq!(batch.len(), 200);
+        assert_eq!(batch.validate(), Ok(()));
+        assert_eq!((batch.executor_id, batch.seq, batch.env_steps), (7, 0, 200));
+        // Random pendulum episodes are short: several ended, each reported once with its length.
+        assert!(episodes.len() >= 2);
+        let through_last_fall = batch.transitions.terminated.iter().rposition(|&d| d).unwrap() + 1;
+        assert_eq!(episodes.iter().map(|e| e.length as usize).sum::<usize>(), through_last_fall);
+        // The initial priorities are |δ| with the same weights as the learner's own TD errors.
+        let b = Batch {
+            size: batch.len(),
+            observations: batch.transitions.observations.clone(),
+            actions: batch.transitions.actions.clone(),
+            rewards: batch.transitions.rewards.clone(),
+            next_observations: batch.transitions.next_observations.clone(),
+            terminated: batch.transitions.terminated.iter().map(|&d| f32::from(u8::from(d))).collect(),
+            is_weights: None,
+        };
+        let mut learner = learner;
+        let own: Vec<f32> = learner.update(&b).unwrap().td_errors.iter().map(|d| d.abs()).collect();
+        for (a, b) in batch.td_errors.iter().zip(&own) {
+            assert!((a - b).abs() <= 1e-4 * (1.0 + b.abs()), "{a} vs {b}");
+        }
+        assert!(r.flush().unwrap().is_none(), "nothing pending after a flush");
+        r.step().unwrap();
+        assert_eq!(r.flush().unwrap().unwrap().seq, 1);
+    }
+}

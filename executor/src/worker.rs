@@ -1,0 +1,329 @@
+//! The rollout thread: steps while the barrier allows, waits (with a reason and a deadline) when it
+//! does not, loads new weights between steps, and hands everything to publish to the async shell.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use proto::{BarrierReport, EpisodeReport, ExperienceBatch, GlobalStep};
+use tokio::sync::mpsc;
+
+use crate::ExecutorSettings;
+use crate::inbox::Inbox;
+use crate::rollout::Rollout;
+
+/// Why the rollout is not stepping.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wait {
+    /// No global step announced yet (param server not seen).
+    NoGlobalStep,
+    /// No weights loaded yet.
+    NoWeights,
+    /// Its weights are older than the lag bound allows.
+    StaleWeights {
+        /// Version held.
+        have: u64,
+        /// Oldest allowed.
+        min: u64,
+    },
+    /// It used its allowance; the learner must step first.
+    Barrier {
+        /// Its env steps.
+        env_steps: u64,
+        /// The allowance.
+        allowed: u64,
+        /// The learner step it is at.
+        learner_step: u64,
+    },
+}
+
+impl Wait {
+    /// What waits, as a metric-style name.
+    pub fn what(&self) -> &'static str {
+        match self {
+            Wait::NoGlobalStep => "executor/global_step",
+            Wait::NoWeights | Wait::StaleWeights { .. } => "executor/weights",
+            Wait::Barrier { .. } => "executor/barrier",
+        }
+    }
+
+    /// Why, in words.
+    pub fn why(&self) -> String {
+        match self {
+            Wait::NoGlobalStep => "no global step announced yet: is the param server up?".into(),
+            Wait::NoWeights => "waiting for the first weights from the param server".into(),
+            Wait::StaleWeights { have, min } => {
+                format!("weights version {have} is older than the allowed {min}")
+            }
+            Wait::Barrier { env_steps, allowed, learner_step } => {
+                format!(
+                    "env steps {env_steps} reached the allowance {allowed} at learner step {learner_step}"
+                )
+            }
+        }
+    }
+}
+
+/// A progress snapshot for the stats report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Progress {
+    /// Cumulative env steps.
+    pub env_steps: u64,
+    /// Env steps per second since the previous snapshot.
+    pub env_steps_per_s: f64,
+    /// Episodes finished.
+    pub episodes: u64,
+    /// Return of the last finished episode.
+    pub last_return: Option<f64>,
+    /// Loaded weights' version.
+    pub weights_version: Option<u64>,
+    /// The newest announcement seen.
+    pub step: Option<GlobalStep>,
+    /// The allowance now.
+    pub allowed_env_steps: u64,
+    /// Weight loads so far.
+    pub weights_loads: u64,
+    /// Batches handed to the shell.
+    pub batches: u64,
+    /// Non-finite steps dropped.
+    pub dropped_non_finite: u64,
+    /// Total time spent waiting, ms.
+    pub blocked_ms_total: u64,
+    /// What it waits on now, and since when (Unix ms).
+    pub waiting: Option<(Wait, u64)>,
+}
+
+/// What the thread sends the shell.
+#[derive(Debug)]
+pub enum Out {
+    /// A batch for the replay server.
+    Experience(ExperienceBatch),
+    /// A finished episode.
+    Episode(EpisodeReport),
+    /// The barrier state.
+    Barrier(BarrierReport),
+    /// Progress for the stats report.
+    Progress(Box<Progress>),
+}
+
+/// What the thread did, when it stops.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct WorkerReport {
+    /// Env steps taken.
+    pub env_steps: u64,
+    /// Episodes finished.
+    pub episodes: u64,
+    /// Batches handed to the shell.
+    pub batches: u64,
+    /// Weight loads (the first one included).
+    pub weights_loads: u64,
+    /// Distinct weight versions acted with.
+    pub weights_versions_seen: u64,
+    /// Non-finite steps dropped.
+    pub dropped_non_finite: u64,
+    /// Total time waiting, ms.
+    pub blocked_ms_total: u64,
+    /// Largest `env_steps − allowance` seen after any step; never positive when the barrier holds.
+    pub max_over_allowance: i64,
+}
+
+struct Worker {
+    id: u32,
+    rollout: Rollout,
+    inbox: Arc<Inbox>,
+    out: mpsc::Sender<Out>,
+    settings: ExecutorSettings,
+    report: WorkerReport,
+    joined_at: Option<u64>,
+    step: Option<GlobalStep>,
+    allowed: u64,
+    waiting: Option<(Wait, Instant, u64)>,
+    last_return: Option<f64>,
+}
+
+/// Runs the rollout until the inbox says stop (or the shell goes away); errors end it early.
+pub fn run(
+    id: u32,
+    rollout: Rollout,
+    inbox: Arc<Inbox>,
+    out: mpsc::Sender<Out>,
+    settings: ExecutorSettings,
+) -> anyhow::Result<WorkerReport> {
+    let mut w = Worker {
+        id,
+        rollout,
+        inbox,
+        out,
+        settings,
+        report: WorkerReport { max_over_allowance: i64::MIN, ..WorkerReport::default() },
+        joined_at: None,
+        step: None,
+        allowed: 0,
+        waiting: None,
+        last_return: None,
+    };
+    w.run()?;
+    Ok(w.report)
+}
+
+impl Worker {
+    fn send(&self, message: Out) -> bool {
+        // Blocks when the shell is behind: publishing is the executor's back-pressure.
+        self.out.blocking_send(message).is_ok()
+    }
+
+    fn run(&mut self) -> anyhow::Result<()> {
+        let report_every = Duration::from_millis(self.settings.report_interval_ms);
+        let stats_every = Duration::from_millis(self.settings.stats_interval_ms);
+        let deadline = Duration::from_millis(self.settings.wait_deadline_ms);
+        let (mut last_report, mut last_stats) = (Instant::now(), Instant::now());
+        let mut steps_at_stats = 0;
+        let mut versions = std::collections::BTreeSet::new();
+        let mut last_warn = None;
+        loop {
+            let (step, weights, stop, generation) = self.inbox.take();
+            if stop {
+                break;
+            }
+            if let Some(snapshot) = weights {
+                self.rollout.load(&snapshot)?;
+                self.report.weights_loads += 1;
+                versions.insert(snapshot.version);
+            }
+            self.step = step;
+            let wait = self.check();
+            match wait {
+                None => {
+                    if let Some((_, since, _)) = self.waiting.take() {
+                        self.report.blocked_ms_total += since.elapsed().as_millis() as u64;
+                        self.send_report();
+                    }
+                    self.step_once()?;
+                }
+                Some(wait) => {
+                    // Publish what is pending first: the learner may be waiting for exactly these.
+                    self.flush()?;
+                    // A change of reason keeps the time the wait began.
+                    let (since, since_unix) = self
+                        .waiting
+                        .map_or_else(|| (Instant::now(), node::unix_ms()), |(_, at, unix)| (at, unix));
+                    let newly = self.waiting.is_none_or(|(w, _, _)| w != wait);
+                    self.waiting = Some((wait, since, since_unix));
+                    if newly {
+                        self.send_report();
+                    }
+                    let waited = since.elapsed();
+                    if waited >= deadline && last_warn.is_none_or(|at: Instant| at.elapsed() >= deadline) {
+                        last_warn = Some(Instant::now());
+                        let waited_ms = waited.as_millis() as u64;
+                        tracing::warn!(what = wait.what(), why = %wait.why(), waited_ms, "still waiting");
+                    }
+                    self.inbox.wait_for_change(generation, report_every);
+                }
+            }
+            if last_report.elapsed() >= report_every {
+                last_report = Instant::now();
+                if !self.send_report() {
+                    break;
+                }
+            }
+            if last_stats.elapsed() >= stats_every {
+                let seconds = last_stats.elapsed().as_secs_f64();
+                last_stats = Instant::now();
+                let env_steps = self.rollout.env_steps();
+                let rate = (env_steps - steps_at_stats) as f64 / seconds;
+                steps_at_stats = env_steps;
+                self.report.weights_versions_seen = versions.len() as u64;
+                if !self.send(Out::Progress(Box::new(self.progress(rate)))) {
+                    break;
+                }
+            }
+        }
+        self.flush()?;
+        self.report.env_steps = self.rollout.env_steps();
+        self.report.weights_versions_seen = versions.len() as u64;
+        if let Some((_, since, _)) = self.waiting.take() {
+            self.report.blocked_ms_total += since.elapsed().as_millis() as u64;
+        }
+        Ok(())
+    }
+
+    /// Whether the rollout may step now, and if not, why.
+    fn check(&mut self) -> Option<Wait> {
+        let Some(step) = self.step else { return Some(Wait::NoGlobalStep) };
+        let joined_at = *self.joined_at.get_or_insert(step.learner_step);
+        // Never shrinks: a newcomer shrinks the warm-up share, but what was granted stays granted.
+        self.allowed = self.allowed.max(step.allowance(joined_at));
+        let Some(version) = self.rollout.weights_version() else { return Some(Wait::NoWeights) };
+        if version < step.min_weights_version {
+            return Some(Wait::StaleWeights { have: version, min: step.min_weights_version });
+        }
+        let env_steps = self.rollout.env_steps();
+        if env_steps >= self.allowed {
+            return Some(Wait::Barrier { env_steps, allowed: self.allowed, learner_step: step.learner_step });
+        }
+        None
+    }
+
+    fn step_once(&mut self) -> anyhow::Result<()> {
+        let outcome = self.rollout.step()?;
+        let over = self.rollout.env_steps() as i64 - self.allowed as i64;
+        self.report.max_over_allowance = self.report.max_over_allowance.max(over);
+        if outcome.dropped_non_finite {
+            self.report.dropped_non_finite += 1;
+            tracing::warn!("non-finite observation or reward: transition dropped, episode reset");
+        }
+        if let Some(episode) = outcome.episode {
+            self.report.episodes += 1;
+            self.last_return = Some(episode.episode_return);
+            self.flush()?;
+            self.send(Out::Episode(episode));
+        } else if self.rollout.pending() >= self.settings.batch_transitions as usize {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) -> anyhow::Result<()> {
+        if let Some(batch) = self.rollout.flush()? {
+            self.report.batches += 1;
+            self.send(Out::Experience(batch));
+        }
+        Ok(())
+    }
+
+    fn send_report(&self) -> bool {
+        let step = self.step;
+        self.send(Out::Barrier(BarrierReport {
+            executor_id: self.id,
+            env_steps: self.rollout.env_steps(),
+            allowed_env_steps: self.allowed,
+            learner_step_seen: step.map_or(0, |s| s.learner_step),
+            joined_at: self.joined_at.unwrap_or(0),
+            weights_version: self.rollout.weights_version().unwrap_or(0),
+            blocked: self.waiting.is_some(),
+            blocked_ms_total: self.blocked_ms_total_now(),
+        }))
+    }
+
+    fn blocked_ms_total_now(&self) -> u64 {
+        self.report.blocked_ms_total
+            + self.waiting.map_or(0, |(_, since, _)| since.elapsed().as_millis() as u64)
+    }
+
+    fn progress(&self, env_steps_per_s: f64) -> Progress {
+        Progress {
+            env_steps: self.rollout.env_steps(),
+            env_steps_per_s,
+            episodes: self.report.episodes,
+            last_return: self.last_return,
+            weights_version: self.rollout.weights_version(),
+            step: self.step,
+            allowed_env_steps: self.allowed,
+            weights_loads: self.report.weights_loads,
+            batches: self.report.batches,
+            dropped_non_finite: self.report.dropped_non_finite,
+            blocked_ms_total: self.blocked_ms_total_now(),
+            waiting: self.waiting.map(|(w, _, unix)| (w, unix)),
+        }
+    }
+}

@@ -1,0 +1,159 @@
+//! The prefetch pipeline: `prefetch_batches` request loops, each with one sample request in flight,
+//! so a batch is waiting whenever an update ends and the update thread never waits on the bus while
+//! it could compute. Refusals and silences become a visible reason, and every request has a timeout.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+use node::{Bus, Shutdown};
+use proto::{SampleReply, SampleRequest, topics};
+use tokio::sync::mpsc;
+
+use crate::batch::Sampled;
+
+/// Why the pipeline is not delivering, shared by the request loops.
+#[derive(Debug, Default, Clone, PartialEq)]
+pub struct FetchStatus {
+    /// Batches received.
+    pub batches: u64,
+    /// Requests refused by the replay server, by reason (`below_min_size`, `rate_limited`, ...).
+    pub refused: std::collections::BTreeMap<String, u64>,
+    /// Requests nobody answered within the timeout (replay server down or restarting).
+    pub unanswered: u64,
+    /// Replies that did not decode, by reason.
+    pub bad_replies: u64,
+    /// The current reason no batch arrives, and since when (Unix ms); cleared by the next batch.
+    pub waiting: Option<(String, u64)>,
+}
+
+/// Shared state of the request loops.
+#[derive(Debug, Default)]
+pub struct Fetcher {
+    status: Mutex<FetchStatus>,
+    next_request: AtomicU64,
+}
+
+impl Fetcher {
+    fn update(&self, f: impl FnOnce(&mut FetchStatus)) {
+        f(&mut self.status.lock().unwrap_or_else(PoisonError::into_inner));
+    }
+
+    fn wait_reason(&self, why: String) {
+        self.update(|s| {
+            if s.waiting.as_ref().is_none_or(|(w, _)| *w != why) {
+                tracing::info!(%why, "learner waiting for batches");
+                s.waiting = Some((why, node::unix_ms()));
+            }
+        });
+    }
+
+    /// The status now.
+    pub fn status(&self) -> FetchStatus {
+        self.status.lock().unwrap_or_else(PoisonError::into_inner).clone()
+    }
+}
+
+/// What one request loop needs.
+#[derive(Debug, Clone)]
+pub struct Requests {
+    /// The bus.
+    pub bus: Bus,
+    /// Shared status and request ids.
+    pub fetcher: Arc<Fetcher>,
+    /// The learner step to put in requests.
+    pub step: Arc<AtomicU64>,
+    /// Transitions per batch.
+    pub batch_size: u32,
+    /// Per-request timeout.
+    pub timeout: Duration,
+    /// Keep IS weights (prioritized replay).
+    pub prioritized: bool,
+}
+
+/// One request loop: ask, wait for the reply (bounded), hand the batch over; until shutdown or the
+/// update thread hangs up.
+pub async fn request_loop(r: Requests, batches: mpsc::Sender<Sampled>, mut shutdown: Shutdown) {
+    let key = topics::replay_sample(r.bus.run());
+    loop {
+        let request = SampleRequest {
+            request_id: r.fetcher.next_request.fetch_add(1, Ordering::Relaxed),
+            learner_step: r.step.load(Ordering::Relaxed),
+            batch_size: r.batch_size,
+        };
+        let outcome = tokio::select! {
+            _ = shutdown.wait() => return,
+            outcome = ask(&r.bus, &key, &request, r.timeout) => outcome,
+        };
+        let pause = match outcome {
+            Asked::Reply(Ok(SampleReply::Batch(batch))) => {
+                r.fetcher.update(|s| {
+                    s.batches += 1;
+                    s.waiting = None;
+                });
+                let sampled = Sampled::from_wire(batch, r.prioritized);
+                tokio::select! {
+                    _ = shutdown.wait() => return,
+                    sent = batches.send(sampled) => if sent.is_err() { return },
+                }
+                continue;
+            }
+            Asked::Reply(Ok(SampleReply::Refused(refusal))) => {
+                let name = refusal_name(&refusal.reason);
+                r.fetcher.update(|s| *s.refused.entry(name.into()).or_default() += 1);
+                r.fetcher.wait_reason(format!("replay server refused: {}", refusal.reason));
+                Duration::from_millis(u64::from(refusal.retry_after_ms).clamp(10, 1000))
+            }
+            Asked::Reply(Err(error)) => {
+                r.fetcher.update(|s| s.bad_replies += 1);
+                tracing::warn!(%error, "undecodable sample reply");
+                Duration::from_millis(100)
+            }
+            Asked::Error(why) => {
+                r.fetcher.wait_reason(format!("replay server error: {why}"));
+                Duration::from_millis(200)
+            }
+            Asked::Silence => {
+                r.fetcher.update(|s| s.unanswered += 1);
+                r.fetcher.wait_reason("replay server not answering (down or restarting)".into());
+                Duration::from_millis(200)
+            }
+        };
+        tokio::select! {
+            _ = shutdown.wait() => return,
+            _ = tokio::time::sleep(pause) => {}
+        }
+    }
+}
+
+enum Asked {
+    Reply(Result<SampleReply, proto::DecodeError>),
+    Error(String),
+    Silence,
+}
+
+async fn ask(bus: &Bus, key: &str, request: &SampleRequest, timeout: Duration) -> Asked {
+    let get = bus.session().get(key).payload(proto::encode(request)).express(true).timeout(timeout);
+    let replies = match get.await {
+        Ok(replies) => replies,
+        Err(error) => return Asked::Error(error.to_string()),
+    };
+    match replies.recv_async().await {
+        Ok(reply) => match reply.result() {
+            Ok(sample) => Asked::Reply(proto::decode(&sample.payload().to_bytes())),
+            Err(error) => Asked::Error(String::from_utf8_lossy(&error.payload().to_bytes()).into_owned()),
+        },
+        Err(_) => Asked::Silence,
+    }
+}
+
+fn refusal_name(reason: &proto::RefusalReason) -> &'static str {
+    use proto::RefusalReason as R;
+    match reason {
+        R::BelowMinSize { .. } => "below_min_size",
+        R::RateLimited { .. } => "rate_limited",
+        R::BatchTooLarge { .. } => "batch_too_large",
+        R::ShuttingDown => "shutting_down",
+        R::Other { .. } => "other",
+    }
+}

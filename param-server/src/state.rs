@@ -1,0 +1,285 @@
+//! The param server's state, sans-IO: encoded messages in, announcements and stats out.
+
+use std::time::Instant;
+
+use node::Rejects;
+use proto::{BarrierReport, BlockedReason, GlobalStep, LearnerStep, NodeId, StatsReport, WeightsSnapshot};
+
+use crate::{Barrier, BarrierRule, ParamStore, Rejected};
+
+/// What the param server has done.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct StateCounts {
+    /// Weight snapshots taken (newer than the one held).
+    pub snapshots_accepted: u64,
+    /// Weight queries answered (with weights or an error).
+    pub weights_served: u64,
+    /// Learner progress messages received.
+    pub learner_steps: u64,
+    /// Barrier reports received.
+    pub barrier_reports: u64,
+    /// Executors seen joining, and leaving (liveliness).
+    pub executors_joined: u64,
+    /// Executors seen leaving or dying.
+    pub executors_left: u64,
+}
+
+/// Barrier, weights store, counters and rejections.
+#[derive(Debug)]
+pub struct State {
+    barrier: Barrier,
+    store: ParamStore,
+    counts: StateCounts,
+    rejects: Rejects,
+    /// When the learner's step last moved, to say how long it has been still.
+    learner_moved_at: Instant,
+}
+
+impl State {
+    /// Empty state under `rule`.
+    pub fn new(rule: BarrierRule) -> Self {
+        Self {
+            barrier: Barrier::new(rule),
+            store: ParamStore::default(),
+            counts: StateCounts::default(),
+            rejects: Rejects::default(),
+            learner_moved_at: Instant::now(),
+        }
+    }
+
+    /// A frame from `params/publish`. Returns whether it became the latest weights.
+    pub fn on_weights(&mut self, bytes: &[u8]) -> bool {
+        let snapshot = match proto::decode::<WeightsSnapshot>(bytes) {
+            Ok(snapshot) => snapshot,
+            Err(error) => {
+                self.rejects.decode_failed("weights", &error);
+                return false;
+            }
+        };
+        let learner_step = snapshot.learner_step;
+        match self.store.offer(snapshot) {
+            Ok(version) => {
+                self.counts.snapshots_accepted += 1;
+                self.barrier.published(version);
+                if self.barrier.learner_step(learner_step) {
+                    self.learner_moved_at = Instant::now();
+                }
+                true
+            }
+            Err(Rejected::NotNewer { version, held }) => {
+                let detail = format!("version {version} is not newer than {held}");
+                self.rejects.record("weights/not_newer", &detail, Instant::now());
+                false
+            }
+        }
+    }
+
+    /// A frame from `control/learner`. Returns whether the global step moved.
+    pub fn on_learner_step(&mut self, bytes: &[u8]) -> bool {
+        match proto::decode::<LearnerStep>(bytes) {
+            Ok(step) => {
+                self.counts.learner_steps += 1;
+                let moved = self.barrier.learner_step(step.learner_step);
+                if moved {
+                    self.learner_moved_at = Instant::now();
+                }
+                moved
+            }
+            Err(error) => {
+                self.rejects.decode_failed("learner_step", &error);
+                false
+            }
+        }
+    }
+
+    /// A frame from `control/barrier/<key_id>` (`None`: the key did not parse).
+    pub fn on_barrier_report(&mut self, key_id: Option<u32>, bytes: &[u8]) {
+        match proto::decode::<BarrierReport>(bytes) {
+            Ok(report) if key_id == Some(report.executor_id) => {
+                self.counts.barrier_reports += 1;
+                self.barrier.report(report);
+            }
+            Ok(report) => {
+                let detail = format!("report of executor {} on key {key_id:?}", report.executor_id);
+                self.rejects.record("barrier/wrong_key", &detail, Instant::now());
+            }
+            Err(error) => self.rejects.decode_failed("barrier", &error),
+        }
+    }
+
+    /// An executor's liveliness token appeared (`alive`) or vanished. Returns whether the barrier changed.
+    pub fn on_liveliness(&mut self, executor: u32, alive: bool) -> bool {
+        let changed = if alive { self.barrier.joined(executor) } else { self.barrier.left(executor) };
+        if changed && alive {
+            self.counts.executors_joined += 1;
+            tracing::info!(executor, live = self.barrier.executors(), "executor joined");
+        } else if changed {
+            self.counts.executors_left += 1;
+            tracing::warn!(
+                executor,
+                live = self.barrier.executors(),
+                "executor left; its share goes to the rest"
+            );
+        }
+        changed
+    }
+
+    /// One weights query answered.
+    pub fn served(&mut self) {
+        self.counts.weights_served += 1;
+    }
+
+    /// What `control/step` says now.
+    pub fn announcement(&self) -> GlobalStep {
+        self.barrier.announcement()
+    }
+
+    /// Counters.
+    pub fn counts(&self) -> StateCounts {
+        self.counts
+    }
+
+    /// Rejections.
+    pub fn rejects(&self) -> &Rejects {
+        &self.rejects
+    }
+
+    /// The stats report: the global step, and the barrier of every executor with what blocks it.
+    pub fn stats(&self, node: NodeId, unix_ms: u64) -> StatsReport {
+        let step = self.announcement();
+        let mut r = StatsReport::new(node, unix_ms);
+        let c = self.counts;
+        r.push_metric("param/learner_step", step.learner_step as f64);
+        r.push_metric("param/weights_version", step.weights_version as f64);
+        r.push_metric("param/min_weights_version", step.min_weights_version as f64);
+        r.push_metric("param/warm_up_share", step.warm_up_share as f64);
+        r.push_metric("param/live_executors", f64::from(step.live_executors));
+        r.push_metric("param/weights_bytes", self.store.latest().map_or(0, |s| s.safetensors.len()) as f64);
+        r.push_metric("param/snapshots_accepted", c.snapshots_accepted as f64);
+        r.push_metric("param/weights_served", c.weights_served as f64);
+        r.push_metric("param/executors_left", c.executors_left as f64);
+        let still_s = self.learner_moved_at.elapsed().as_secs();
+        let mut blocked_executors = 0;
+        for (id, report) in self.barrier.reports() {
+            let Some(rep) = report else { continue };
+            let prefix = format!("param/executor.{id}");
+            r.push_metric(format!("{prefix}.env_steps"), rep.env_steps as f64);
+            r.push_metric(format!("{prefix}.allowed_env_steps"), rep.allowed_env_steps as f64);
+            r.push_metric(
+                format!("{prefix}.weights_lag"),
+                step.weights_version.saturating_sub(rep.weights_version) as f64,
+            );
+            r.push_metric(format!("{prefix}.blocked_ms_total"), rep.blocked_ms_total as f64);
+            r.push_metric(format!("{prefix}.blocked"), if rep.blocked { 1.0 } else { 0.0 });
+            blocked_executors += u32::from(rep.blocked);
+        }
+        if self.store.latest().is_none() {
+            r.blocked.push(BlockedReason {
+                what: "param/weights".into(),
+                why: "no weights published by the learner yet".into(),
+                since_ms: unix_ms,
+            });
+        }
+        if blocked_executors > 0 && still_s >= 2 {
+            let why = if step.learner_step == 0 {
+                format!(
+                    "{blocked_executors} executors used their warm-up share of {} and the learner has not stepped yet",
+                    step.warm_up_share
+                )
+            } else {
+                format!(
+                    "{blocked_executors} executors wait at the barrier; the learner has not moved from step {} for {still_s} s",
+                    step.learner_step
+                )
+            };
+            r.blocked.push(BlockedReason { what: "param/barrier".into(), why, since_ms: unix_ms });
+        }
+        r.rejected = self.rejects.to_report();
+        r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use proto::{Message, Role};
+
+    use super::*;
+
+    fn rule() -> BarrierRule {
+        BarrierRule { env_steps_per_learner_step: 1, warm_up_transitions: 100, max_weight_lag: None }
+    }
+
+    fn weights(version: u64) -> Vec<u8> {
+        proto::encode(&WeightsSnapshot { version, learner_step: version, safetensors: vec![1, 2, 3] })
+    }
+
+    #[test]
+    fn weights_and_steps_move_the_announcement_forward_only() {
+        let mut s = State::new(rule());
+        assert!(s.on_weights(&weights(0)));
+        assert!(!s.on_weights(&weights(0)), "a repeat is not newer");
+        assert!(s.on_weights(&weights(50)));
+        assert_eq!(s.announcement().weights_version, 50);
+        assert_eq!(s.announcement().learner_step, 50, "the snapshot's learner step counts too");
+        assert!(s.on_learner_step(&proto::encode(&LearnerStep { learner_step: 60, weights_version: 50 })));
+        assert!(!s.on_learner_step(&proto::encode(&LearnerStep { learner_step: 55, weights_version: 50 })));
+        assert_eq!(s.announcement().learner_step, 60);
+        assert_eq!(s.rejects().counts()["weights/not_newer"], 1);
+    }
+
+    #[test]
+    fn bad_frames_are_counted_by_reason_and_change_nothing() {
+        let mut s = State::new(rule());
+        assert!(!s.on_weights(b"garbage"));
+        let mut corrupt = weights(5);
+        let last = corrupt.len() - 1;
+        corrupt[last] ^= 0xFF;
+        assert!(!s.on_weights(&corrupt));
+        assert!(!s.on_learner_step(&weights(5)), "wrong kind");
+        let report = BarrierReport {
+            executor_id: 3,
+            env_steps: 10,
+            allowed_env_steps: 25,
+            learner_step_seen: 0,
+            joined_at: 0,
+            weights_version: 0,
+            blocked: true,
+            blocked_ms_total: 5,
+        };
+        s.on_barrier_report(Some(4), &proto::encode(&report));
+        assert_eq!(s.announcement().live_executors, 0);
+        let counts = s.rejects().counts();
+        assert_eq!(counts["weights/truncated"], 1);
+        assert_eq!(counts["weights/checksum"], 1);
+        assert_eq!(counts["learner_step/wrong_kind"], 1);
+        assert_eq!(counts["barrier/wrong_key"], 1);
+        assert_eq!(s.announcement().weights_version, 0);
+    }
+
+    #[test]
+    fn liveliness_sets_the_share_and_stats_show_each_executor() {
+        let mut s = State::new(rule());
+        assert!(s.on_liveliness(0, true));
+        assert!(s.on_liveliness(1, true));
+        assert!(!s.on_liveliness(1, true));
+        assert_eq!(s.announcement().warm_up_share, 50);
+        let report = BarrierReport {
+            executor_id: 1,
+            env_steps: 50,
+            allowed_env_steps: 50,
+            learner_step_seen: 0,
+            joined_at: 0,
+            weights_version: 0,
+            blocked: true,
+            blocked_ms_total: 5,
+        };
+        s.on_barrier_report(Some(1), &proto::encode(&report));
+        let stats = s.stats(NodeId { role: Role::Param, id: 0 }, 1);
+        assert_eq!(stats.validate(), Ok(()));
+        assert_eq!(stats.metric("param/executor.1.blocked"), Some(1.0));
+        assert_eq!(stats.metric("param/live_executors"), Some(2.0));
+        assert!(stats.blocked.iter().any(|b| b.what == "param/weights"));
+        assert!(s.on_liveliness(0, false));
+        assert_eq!(s.announcement().warm_up_share, 100);
+    }
+}
