@@ -1,10 +1,14 @@
-//! `sac-lsp`: the command-line front of the project (rollouts for checking the environments against
-//! other implementations; more subcommands join as the runtime grows).
+//! `sac-lsp`: the command-line front of the project: `rollout` (checking the environments against
+//! other implementations), `train` (single-machine training), `monitor` (a live view and JSONL record
+//! of a distributed run's topics) and `plot` (PNG learning curves from that record).
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 mod csv;
+mod json;
+mod monitor;
+mod plot;
 mod rollout;
 mod train;
 
@@ -22,6 +26,10 @@ enum Command {
     Rollout(rollout::RolloutArgs),
     /// Train SAC-LSP on one machine (environment, replay and learner in this process).
     Train(train::TrainArgs),
+    /// Watch a distributed run on the bus: a live view, and a JSONL record for `plot`.
+    Monitor(monitor::MonitorArgs),
+    /// Draw learning curves (PNG) from a `monitor` record.
+    Plot(plot::PlotArgs),
 }
 
 fn main() -> Result<()> {
@@ -34,5 +42,7 @@ fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Rollout(args) => rollout::run(&args),
         Command::Train(args) => train::run(&args),
+        Command::Monitor(args) => monitor::run(&args),
+        Command::Plot(args) => plot::run(&args),
     }
 }

@@ -1,0 +1,91 @@
+//! The key families the monitor subscribes to, and a counter per family: how many messages arrived
+//! and how many could not be decoded, so a version mismatch or a corrupt publisher shows on screen
+//! instead of as silently missing figures.
+
+use std::fmt;
+
+/// One subscription of the monitor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Family {
+    /// `stats/**`: [`proto::StatsReport`].
+    Stats,
+    /// `episodes/*`: [`proto::EpisodeReport`].
+    Episodes,
+    /// `eval`: [`proto::EvalReport`].
+    Eval,
+    /// `control/step`: [`proto::GlobalStep`].
+    Step,
+    /// `control/barrier/*`: [`proto::BarrierReport`].
+    Barrier,
+    /// `liveliness/**`: tokens (a key that names no process counts as undecodable).
+    Liveliness,
+}
+
+impl Family {
+    /// Every family, in display order.
+    pub const ALL: [Family; 6] =
+        [Family::Stats, Family::Episodes, Family::Eval, Family::Step, Family::Barrier, Family::Liveliness];
+
+    /// Short name, as on screen.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Family::Stats => "stats",
+            Family::Episodes => "episodes",
+            Family::Eval => "eval",
+            Family::Step => "step",
+            Family::Barrier => "barrier",
+            Family::Liveliness => "liveliness",
+        }
+    }
+
+    fn index(self) -> usize {
+        self as usize
+    }
+}
+
+impl fmt::Display for Family {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// A count per [`Family`].
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct FamilyCounts {
+    counts: [u64; Family::ALL.len()],
+}
+
+impl FamilyCounts {
+    /// Counts one more for `family`.
+    pub fn add(&mut self, family: Family) {
+        self.counts[family.index()] += 1;
+    }
+
+    /// The count for `family`.
+    pub fn get(&self, family: Family) -> u64 {
+        self.counts[family.index()]
+    }
+
+    /// The sum over all families.
+    pub fn total(&self) -> u64 {
+        self.counts.iter().sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counts_are_per_family() {
+        let mut c = FamilyCounts::default();
+        c.add(Family::Eval);
+        c.add(Family::Eval);
+        c.add(Family::Liveliness);
+        assert_eq!(c.get(Family::Eval), 2);
+        assert_eq!(c.get(Family::Liveliness), 1);
+        assert_eq!(c.get(Family::Stats), 0);
+        assert_eq!(c.total(), 3);
+        assert!(Family::ALL.iter().enumerate().all(|(i, f)| f.index() == i));
+    }
+}
