@@ -6,8 +6,10 @@
 #
 # Environment: RUN_ID (default local-<time>; reuse one to resume its learner checkpoint), PORT (the
 # replay server's, default 7447), MINUTES (stop cleanly after that long; default: until Ctrl-C),
-# EXECUTOR_NICE (default 10: executors yield the CPU to the learner, whose updates/s decide the
-# run), BUILD=0 (skip `cargo build`).
+# EXECUTOR_NICE (default 10: executors, and the learner's evaluation thread, yield the CPU to the
+# learner's updates and the replay server), LEARNER_CORE (default 0 on machines with 2+ cores: the
+# learner's update thread gets that core to itself and every other process and thread runs on the
+# rest, since the learner's updates/s decide the run; `none` = no pinning), BUILD=0 (skip `cargo build`).
 # Ctrl-C or TERM stops exactly this script's children, cleanly (each writes its report), within 30 s.
 # If any role dies, the others are stopped and the script exits non-zero naming it.
 set -euo pipefail
@@ -32,6 +34,33 @@ hub="tcp/127.0.0.1:$port"
 common=(--run-id "$run_id" --config "$config")
 peer=(--connect "$hub" --listen tcp/127.0.0.1:0)
 export SACLSP_CHECKPOINT_DIR="$dir/checkpoints"
+
+# CPU placement: one core for the learner's update thread, the others for everything else.
+cores=$(nproc)
+learner_core=${LEARNER_CORE:-0}
+rest=()
+if [[ $cores -ge 2 && $learner_core != none ]] && command -v taskset >/dev/null; then
+    others=$(seq 0 $((cores - 1)) | grep -vx "$learner_core" | paste -sd,)
+    rest=(taskset -c "$others")
+else
+    learner_core=none
+fi
+
+# Moves the learner's update thread onto its core and renices its evaluation thread, once they exist.
+place_learner_threads() {
+    local pid=$1 placed=0
+    for _ in $(seq 200); do
+        for task in /proc/"$pid"/task/*; do
+            case $(cat "$task/comm" 2>/dev/null) in
+                update) [[ $learner_core != none ]] && taskset -p -c "$learner_core" "${task##*/}" >/dev/null && placed=1 ;;
+                evaluate) renice -n "$nice_level" -p "${task##*/}" >/dev/null ;;
+            esac
+        done
+        [[ $placed == 1 || $learner_core == none ]] && return 0
+        sleep 0.05
+    done
+    echo "local.sh: the learner's update thread did not appear; not pinned" >&2
+}
 
 declare -A names=()
 pids=()
@@ -62,13 +91,15 @@ stop_all() {
 trap 'echo "local.sh: stopping $run_id" >&2; stop_all; exit 130' INT TERM
 
 echo "local.sh: run $run_id, $n executors, run file $config, logs in $dir/" >&2
-start replay-server "$bin/replay-server" "${common[@]}" --listen "$hub"
-start param-server "$bin/param-server" "${common[@]}" "${peer[@]}"
-start learner "$bin/learner" "${common[@]}" "${peer[@]}"
+start replay-server "${rest[@]}" "$bin/replay-server" "${common[@]}" --listen "$hub"
+start param-server "${rest[@]}" "$bin/param-server" "${common[@]}" "${peer[@]}"
+start learner "${rest[@]}" "$bin/learner" "${common[@]}" "${peer[@]}"
+place_learner_threads "${pids[-1]}"
+[[ $learner_core != none ]] && echo "local.sh: learner update thread on core $learner_core, everything else on ${others}" >&2
 for ((i = 0; i < n; i++)); do
-    start "executor-$i" nice -n "$nice_level" "$bin/executor" "${common[@]}" --id "$i" "${peer[@]}"
+    start "executor-$i" "${rest[@]}" nice -n "$nice_level" "$bin/executor" "${common[@]}" --id "$i" "${peer[@]}"
 done
-start monitor "$bin/sac-lsp" monitor --run-id "$run_id" "${peer[@]}" --out "$dir/monitor.jsonl" --quiet
+start monitor "${rest[@]}" "$bin/sac-lsp" monitor --run-id "$run_id" "${peer[@]}" --out "$dir/monitor.jsonl" --quiet
 echo "local.sh: live view: $bin/sac-lsp monitor --run-id $run_id --connect $hub --out $dir/view.jsonl" >&2
 
 deadline=""

@@ -52,6 +52,9 @@ use proto::{EvalReport, topics};
 use tokio::sync::mpsc;
 pub use updater::{LossMeans, Out, Progress, Updater, UpdaterReport};
 
+/// Waiting this long for a batch makes the learner tell the param server it is starved.
+const STARVED_AFTER: Duration = Duration::from_secs(1);
+
 /// What the role did, returned when it stops.
 #[derive(Debug, Default, Clone, PartialEq)]
 pub struct Report {
@@ -105,7 +108,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     let requests = Requests {
         bus: bus.clone(),
         fetcher: fetcher.clone(),
-        step,
+        step: step.clone(),
         batch_size: config.agent.batch_size as u32,
         timeout: Duration::from_millis(s.sample_timeout_ms),
         prioritized: s.send_priorities,
@@ -116,11 +119,33 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     drop(batch_tx);
 
     let mut evaluations = Vec::new();
+    let mut starved_check = tokio::time::interval(STARVED_AFTER / 2);
+    let mut weights_version = 0;
     loop {
         tokio::select! {
             _ = shutdown.wait() => break,
+            _ = starved_check.tick() => {
+                // The update thread says nothing while it has no batches; say it for it, so the param
+                // server can tell a starved learner (replay server empty or gone) from a slow one.
+                let waiting_ms = fetcher.status().waiting.map_or(0, |(_, since)| node::unix_ms().saturating_sub(since));
+                if waiting_ms >= STARVED_AFTER.as_millis() as u64 {
+                    let message = proto::LearnerStep {
+                        learner_step: step.load(std::sync::atomic::Ordering::Relaxed),
+                        weights_version,
+                        starved: true,
+                    };
+                    if let Err(error) = bus.put(&topics::control_learner(bus.run()), &message).await {
+                        tracing::debug!(%error, "starvation notice not sent");
+                    }
+                }
+            }
             message = out_rx.recv() => match message {
-                Some(message) => publish(&bus, message, &fetcher, &mut evaluations).await,
+                Some(message) => {
+                    if let Out::Step(s) = &message {
+                        weights_version = s.weights_version;
+                    }
+                    publish(&bus, message, &fetcher, &mut evaluations).await
+                }
                 None => break,
             },
         }

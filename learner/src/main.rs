@@ -11,9 +11,10 @@ struct Args {
     node: NodeArgs,
 }
 
-#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
-async fn main() -> anyhow::Result<()> {
+fn main() -> anyhow::Result<()> {
+    node::single_threaded_numerics();
     let args = Args::parse();
-    node::launch(proto::Role::Learner, &args.node, learner::run).await?;
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
+    runtime.block_on(node::launch(proto::Role::Learner, &args.node, learner::run))?;
     Ok(())
 }

@@ -169,7 +169,7 @@ impl Updater {
         let start_step = self.learner.step();
         let mut report = UpdaterReport { start_step, ..UpdaterReport::default() };
         let mut weights_version = self.publish_weights(&mut report)?;
-        self.send(Out::Step(LearnerStep { learner_step: start_step, weights_version }));
+        self.send(Out::Step(LearnerStep { learner_step: start_step, weights_version, starved: false }));
         let stats_every = Duration::from_millis(s.stats_interval_ms);
         let (mut window_start, mut window_step, mut window_wait) =
             (Instant::now(), start_step, Duration::ZERO);
@@ -216,7 +216,7 @@ impl Updater {
                 weights_version = self.publish_weights(&mut report)?;
             }
             if step.is_multiple_of(s.announce_every_updates) {
-                self.send(Out::Step(LearnerStep { learner_step: step, weights_version }));
+                self.send(Out::Step(LearnerStep { learner_step: step, weights_version, starved: false }));
             }
             if step.is_multiple_of(s.epoch_length_updates) {
                 let epoch = step / s.epoch_length_updates;
@@ -251,7 +251,7 @@ impl Updater {
         let step = self.learner.step();
         if step > start_step {
             weights_version = self.publish_weights(&mut report)?;
-            self.send(Out::Step(LearnerStep { learner_step: step, weights_version }));
+            self.send(Out::Step(LearnerStep { learner_step: step, weights_version, starved: false }));
             self.checkpoint(&mut report);
         }
         report.final_step = step;

@@ -36,12 +36,14 @@ pub struct Barrier {
     versions: Vec<u64>,
     /// Live executors and their latest report (`None` until the first one arrives).
     executors: BTreeMap<u32, Option<BarrierReport>>,
+    /// Env steps granted on top of the warm-up share to break starvation (see [`Barrier::refill`]).
+    refilled: u64,
 }
 
 impl Barrier {
     /// An empty barrier: learner at step 0, no weights, no executors.
     pub fn new(rule: BarrierRule) -> Self {
-        Self { rule, learner_step: 0, versions: Vec::new(), executors: BTreeMap::new() }
+        Self { rule, learner_step: 0, versions: Vec::new(), executors: BTreeMap::new(), refilled: 0 }
     }
 
     /// The learner reached `step`. Returns whether the step moved: global steps never go back, so an
@@ -92,6 +94,20 @@ impl Barrier {
         self.executors.iter().map(|(id, report)| (*id, report.as_ref()))
     }
 
+    /// Whether every live executor's latest report says it waits (and at least one is known).
+    pub fn all_blocked(&self) -> bool {
+        !self.executors.is_empty() && self.executors.values().all(|r| r.is_some_and(|r| r.blocked))
+    }
+
+    /// Grants every executor another warm-up share: what a starved learner needs when the replay
+    /// server lost its contents while executors wait for the learner (otherwise a deadlock).
+    /// Returns the env steps granted per executor.
+    pub fn refill(&mut self) -> u64 {
+        let share = self.rule.warm_up_transitions.div_ceil(self.executors.len().max(1) as u64);
+        self.refilled += share;
+        share
+    }
+
     /// The learner's step as the barrier sees it.
     pub fn step(&self) -> u64 {
         self.learner_step
@@ -113,7 +129,7 @@ impl Barrier {
             learner_step: self.learner_step,
             weights_version: self.versions.last().copied().unwrap_or(0),
             env_steps_per_learner_step: self.rule.env_steps_per_learner_step,
-            warm_up_share: self.rule.warm_up_transitions.div_ceil(live),
+            warm_up_share: self.rule.warm_up_transitions.div_ceil(live) + self.refilled,
             min_weights_version: self.min_weights_version(),
             live_executors: u32::try_from(self.executors.len()).unwrap_or(u32::MAX),
         }
@@ -198,6 +214,20 @@ mod tests {
         unbounded.published(5);
         unbounded.published(9);
         assert_eq!(unbounded.min_weights_version(), 0);
+    }
+
+    #[test]
+    fn a_refill_raises_every_allowance_by_a_share() {
+        let mut b = Barrier::new(rule(1, 100, None));
+        assert!(!b.all_blocked(), "no executors: nobody to unblock");
+        b.report(BarrierReport { blocked: true, ..report(0, 50) });
+        b.report(report(1, 50));
+        assert!(!b.all_blocked());
+        b.report(BarrierReport { blocked: true, ..report(1, 50) });
+        assert!(b.all_blocked());
+        b.learner_step(7);
+        assert_eq!(b.refill(), 50);
+        assert_eq!(b.announcement().allowance(0), 50 + 50 + 7);
     }
 
     #[test]

@@ -120,7 +120,10 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
                 state.served();
                 false
             }
-            _ = announce.tick() => true,
+            _ = announce.tick() => {
+                state.break_starvation();
+                true
+            }
             _ = stats.tick() => {
                 if let Err(error) = bus.put_stats(&state.stats(bus.node(), node::unix_ms())).await {
                     tracing::debug!(%error, "stats not published");

@@ -22,6 +22,8 @@ pub struct StateCounts {
     pub executors_joined: u64,
     /// Executors seen leaving or dying.
     pub executors_left: u64,
+    /// Warm-up refills granted to a starved learner.
+    pub refills: u64,
 }
 
 /// Barrier, weights store, counters and rejections.
@@ -33,7 +35,14 @@ pub struct State {
     rejects: Rejects,
     /// When the learner's step last moved, to say how long it has been still.
     learner_moved_at: Instant,
+    /// The learner says it is starved (since when).
+    starved_since: Option<Instant>,
+    /// The last refill.
+    refilled_at: Option<Instant>,
 }
+
+/// How long a starved learner with every executor blocked waits before a refill, and between refills.
+const REFILL_AFTER: std::time::Duration = std::time::Duration::from_secs(1);
 
 impl State {
     /// Empty state under `rule`.
@@ -44,6 +53,8 @@ impl State {
             counts: StateCounts::default(),
             rejects: Rejects::default(),
             learner_moved_at: Instant::now(),
+            starved_since: None,
+            refilled_at: None,
         }
     }
 
@@ -79,11 +90,15 @@ impl State {
         match proto::decode::<LearnerStep>(bytes) {
             Ok(step) => {
                 self.counts.learner_steps += 1;
+                self.starved_since = match (step.starved, self.starved_since) {
+                    (false, _) => None,
+                    (true, since) => Some(since.unwrap_or_else(Instant::now)),
+                };
                 let moved = self.barrier.learner_step(step.learner_step);
                 if moved {
                     self.learner_moved_at = Instant::now();
                 }
-                moved
+                moved | self.break_starvation()
             }
             Err(error) => {
                 self.rejects.decode_failed("learner_step", &error);
@@ -124,6 +139,22 @@ impl State {
         changed
     }
 
+    /// A starved learner with every executor waiting at the barrier is a deadlock (the replay
+    /// server came back empty): grant a fresh warm-up share, at most once per second. Returns
+    /// whether the announcement changed.
+    pub fn break_starvation(&mut self) -> bool {
+        let Some(since) = self.starved_since else { return false };
+        let due = self.refilled_at.is_none_or(|at| at.elapsed() >= REFILL_AFTER);
+        if since.elapsed() < REFILL_AFTER || !due || !self.barrier.all_blocked() {
+            return false;
+        }
+        let share = self.barrier.refill();
+        self.refilled_at = Some(Instant::now());
+        self.counts.refills += 1;
+        tracing::warn!(share, "learner starved while every executor waits: granting a fresh warm-up share");
+        true
+    }
+
     /// One weights query answered.
     pub fn served(&mut self) {
         self.counts.weights_served += 1;
@@ -158,6 +189,14 @@ impl State {
         r.push_metric("param/snapshots_accepted", c.snapshots_accepted as f64);
         r.push_metric("param/weights_served", c.weights_served as f64);
         r.push_metric("param/executors_left", c.executors_left as f64);
+        r.push_metric("param/refills", c.refills as f64);
+        if let Some(since) = self.starved_since {
+            r.blocked.push(BlockedReason {
+                what: "param/learner_starved".into(),
+                why: format!("the learner has waited for data for {} s", since.elapsed().as_secs()),
+                since_ms: unix_ms,
+            });
+        }
         let still_s = self.learner_moved_at.elapsed().as_secs();
         let mut blocked_executors = 0;
         for (id, report) in self.barrier.reports() {
@@ -221,8 +260,16 @@ mod tests {
         assert!(s.on_weights(&weights(50)));
         assert_eq!(s.announcement().weights_version, 50);
         assert_eq!(s.announcement().learner_step, 50, "the snapshot's learner step counts too");
-        assert!(s.on_learner_step(&proto::encode(&LearnerStep { learner_step: 60, weights_version: 50 })));
-        assert!(!s.on_learner_step(&proto::encode(&LearnerStep { learner_step: 55, weights_version: 50 })));
+        assert!(s.on_learner_step(&proto::encode(&LearnerStep {
+            learner_step: 60,
+            weights_version: 50,
+            starved: false
+        })));
+        assert!(!s.on_learner_step(&proto::encode(&LearnerStep {
+            learner_step: 55,
+            weights_version: 50,
+            starved: false
+        })));
         assert_eq!(s.announcement().learner_step, 60);
         assert_eq!(s.rejects().counts()["weights/not_newer"], 1);
     }

@@ -25,7 +25,8 @@ pub struct GlobalStep {
     /// executor would block forever.
     pub env_steps_per_learner_step: u64,
     /// Env steps each executor may take before the learner's first step: the replay minimum shared
-    /// between the live executors, so the dead never hold the rest back.
+    /// between the live executors, so the dead never hold the rest back (plus any refill granted
+    /// to a starved learner, see [`LearnerStep::starved`]).
     pub warm_up_share: u64,
     /// Executors must act with weights of at least this version (0: no lag bound).
     pub min_weights_version: u64,
@@ -59,6 +60,10 @@ pub struct LearnerStep {
     pub learner_step: u64,
     /// Version of the newest weights the learner has published.
     pub weights_version: u64,
+    /// The learner is waiting for data: the replay server refuses (below its minimum) or is silent.
+    /// With every executor at the barrier this is a deadlock (a replay server restarted empty); the
+    /// param server breaks it by granting a fresh warm-up share.
+    pub starved: bool,
 }
 
 impl Sealed for LearnerStep {}

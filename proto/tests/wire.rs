@@ -227,7 +227,7 @@ fn control_messages() {
         live_executors: 8,
     };
     check_message(&step, 1);
-    check_message(&LearnerStep { learner_step: 10, weights_version: 8 }, 1);
+    check_message(&LearnerStep { learner_step: 10, weights_version: 8, starved: false }, 1);
     let eval =
         EvalReport { epoch: 3, learner_step: 3000, episodes: 1, mean_return: 812.5, mean_length: 1000.0 };
     check_message(&eval, 1);

@@ -199,6 +199,36 @@ impl Cluster {
         self.wait_alive(NodeId { role: Role::Executor, id }).await
     }
 
+    /// Stops the learner cleanly (it writes its final checkpoint when the run file gives it a
+    /// `checkpoint_dir`) and starts a new one, which resumes from that checkpoint. Returns the old
+    /// learner's report once the new one is alive.
+    pub async fn restart_learner(&mut self) -> Result<learner::Report> {
+        // Its checkpoint is read at start, so the old one must have stopped (and written it) first.
+        self.learner.trigger.fire();
+        let stopped = within("the old learner to stop", WAIT, &mut self.learner.task).await?;
+        let report = stopped.context("the old learner panicked")??;
+        let bus =
+            open(&self.run, Role::Learner, 0, &BusConfig::loopback(vec![self.endpoint.clone()])).await?;
+        let config = role_config(&self.config)?;
+        self.learner = spawn(|s| learner::run(config, bus, s));
+        self.wait_alive(NodeId { role: Role::Learner, id: 0 }).await?;
+        Ok(report)
+    }
+
+    /// Stops the replay server cleanly and starts a new one on the same endpoint. Without a
+    /// `snapshot_path` it comes back empty: the learner starves until executors refill it.
+    pub async fn restart_replay(&mut self) -> Result<replay_server::Report> {
+        self.replay.trigger.fire();
+        let stopped = within("the old replay server to stop", WAIT, &mut self.replay.task).await?;
+        let report = stopped.context("the old replay server panicked")??;
+        let server = BusConfig { listen: vec![self.endpoint.clone()], ..BusConfig::default() };
+        let bus = open(&self.run, Role::Replay, 0, &server).await?;
+        let config = role_config(&self.config)?;
+        self.replay = spawn(|s| replay_server::run(config, bus, s));
+        self.wait_alive(NodeId { role: Role::Replay, id: 0 }).await?;
+        Ok(report)
+    }
+
     /// Kills executor `id` without a clean shutdown: its task is aborted mid-step, its session
     /// dropped, so its liveliness token vanishes as a crashed process's would.
     pub async fn kill_executor(&mut self, id: u32) -> Result<()> {

@@ -15,14 +15,7 @@ use sim::Environment;
 use super::record::{EpochRecord, LossMeans};
 use super::run_config::RunConfig;
 
-/// The outcome of one evaluation.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Evaluation {
-    /// Mean undiscounted return.
-    pub mean_return: f64,
-    /// Mean episode length.
-    pub mean_length: f64,
-}
+pub use learner::Evaluation;
 
 /// A single-machine SAC-LSP run: environment, replay, learner and the acting policy.
 pub struct Trainer {
@@ -195,29 +188,11 @@ impl Trainer {
         Ok(out.metrics)
     }
 
-    /// Runs `episodes` episodes in deterministic mode on the evaluation env. As the paper's
-    /// `deterministic()` context, one latent is drawn per evaluation and held for all its episodes.
+    /// Runs `episodes` episodes in deterministic mode on the evaluation env, with the learner's
+    /// current weights: the distributed learner's evaluation, the same function.
     pub fn evaluate(&mut self, episodes: u32) -> Result<Evaluation> {
         self.actor.load(&self.learner.snapshot()?)?;
-        self.actor.redraw_fixed_latent();
-        let (mut returns, mut lengths) = (Vec::new(), Vec::new());
-        for _ in 0..episodes {
-            let mut observation = to_f32(&self.eval_env.reset(None));
-            let (mut total, mut length) = (0.0, 0u32);
-            loop {
-                let act = self.actor.act(&observation, Mode::Deterministic)?;
-                let step = self.eval_env.step(&self.eval_env.spec().action_from_unit(&act.env_action))?;
-                total += step.reward;
-                length += 1;
-                if step.terminated || step.truncated {
-                    break;
-                }
-                observation = to_f32(&step.observation);
-            }
-            returns.push(total);
-            lengths.push(f64::from(length));
-        }
-        Ok(Evaluation { mean_return: mean(&returns), mean_length: mean(&lengths) })
+        learner::evaluate(&mut self.actor, self.eval_env.as_mut(), episodes)
     }
 }
 

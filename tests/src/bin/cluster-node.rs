@@ -25,9 +25,14 @@ struct Args {
     node: NodeArgs,
 }
 
-#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
-async fn main() -> anyhow::Result<()> {
+fn main() -> anyhow::Result<()> {
+    node::single_threaded_numerics();
     let args = Args::parse();
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
+    runtime.block_on(run(args))
+}
+
+async fn run(args: Args) -> anyhow::Result<()> {
     let n = &args.node;
     match args.role {
         Which::Replay => node::launch(Role::Replay, n, replay_server::run).await.map(drop),
