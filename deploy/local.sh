@@ -11,7 +11,9 @@
 # learner's update thread gets that core to itself and every other process and thread runs on the
 # rest, since the learner's updates/s decide the run; `none` = no pinning), BUILD=0 (skip `cargo build`).
 # Ctrl-C or TERM stops exactly this script's children, cleanly (each writes its report), within 30 s.
-# If any role dies, the others are stopped and the script exits non-zero naming it.
+# An executor that dies is restarted (a fresh process joins with the current weights; at most
+# EXECUTOR_RESTARTS times each, default 3) while the others go on; if the replay server, param
+# server, learner or monitor dies, the others are stopped and the script exits non-zero naming it.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
@@ -62,14 +64,17 @@ place_learner_threads() {
     echo "local.sh: the learner's update thread did not appear; not pinned" >&2
 }
 
-declare -A names=()
+declare -A names=() restarts=()
 pids=()
 start() { # name, command...
     local name=$1
     shift
-    "$@" >"$dir/$name.log" 2>&1 &
+    "$@" >>"$dir/$name.log" 2>&1 &
     pids+=($!)
     names[$!]=$name
+}
+start_executor() { # id
+    start "executor-$1" "${rest[@]}" nice -n "$nice_level" "$bin/executor" "${common[@]}" --id "$1" "${peer[@]}"
 }
 
 stopping=0
@@ -97,7 +102,7 @@ start learner "${rest[@]}" "$bin/learner" "${common[@]}" "${peer[@]}"
 place_learner_threads "${pids[-1]}"
 [[ $learner_core != none ]] && echo "local.sh: learner update thread on core $learner_core, everything else on ${others}" >&2
 for ((i = 0; i < n; i++)); do
-    start "executor-$i" "${rest[@]}" nice -n "$nice_level" "$bin/executor" "${common[@]}" --id "$i" "${peer[@]}"
+    start_executor "$i"
 done
 start monitor "${rest[@]}" "$bin/sac-lsp" monitor --run-id "$run_id" "${peer[@]}" --out "$dir/monitor.jsonl" --quiet
 echo "local.sh: live view: $bin/sac-lsp monitor --run-id $run_id --connect $hub --out $dir/view.jsonl" >&2
@@ -109,8 +114,22 @@ while true; do
         if ! kill -0 "$pid" 2>/dev/null; then
             status=0
             wait "$pid" || status=$?
-            echo "local.sh: ${names[$pid]} (pid $pid) exited with status $status; see $dir/${names[$pid]}.log" >&2
-            tail -n 5 "$dir/${names[$pid]}.log" >&2 || true
+            name=${names[$pid]}
+            echo "local.sh: $name (pid $pid) exited with status $status; see $dir/$name.log" >&2
+            if [[ $name == executor-* && $stopping == 0 ]]; then
+                id=${name#executor-}
+                restarts[$id]=$((${restarts[$id]:-0} + 1))
+                if [[ ${restarts[$id]} -le ${EXECUTOR_RESTARTS:-3} ]]; then
+                    echo "local.sh: restarting $name (restart ${restarts[$id]}); the others go on" >&2
+                    remaining=()
+                    for p in "${pids[@]}"; do [[ $p != "$pid" ]] && remaining+=("$p"); done
+                    pids=("${remaining[@]}")
+                    start_executor "$id"
+                    continue 2
+                fi
+                echo "local.sh: $name died more than ${EXECUTOR_RESTARTS:-3} times" >&2
+            fi
+            tail -n 5 "$dir/$name.log" >&2 || true
             stop_all
             [[ ${names[$pid]} == learner && $status == 0 ]] && exit 0 # max_updates reached
             exit 1

@@ -49,45 +49,7 @@ pub struct Spec {
 impl Spec {
     /// Tiny networks on the real Ant, short episodes, a small replay minimum, frequent weights.
     pub fn tiny(run_id: &str, executors: u32) -> Spec {
-        let config = r#"
-[train]
-task = "ant-v5"
-seed = 3
-
-[agent]
-critic_hidden = [16]
-embedding_layers = [16, 4]
-coupling_hidden = [4]
-batch_size = 32
-
-[replay_server]
-min_size_to_sample = 200
-request_deadline_ms = 500
-stats_interval_ms = 200
-[replay_server.buffer]
-capacity_transitions = 20000
-memory_budget_bytes = 268435456
-
-[param_server]
-warm_up_transitions = 300
-env_steps_per_learner_step = 1
-announce_interval_ms = 100
-stats_interval_ms = 200
-
-[learner]
-prefetch_batches = 2
-publish_weights_every_updates = 25
-announce_every_updates = 1
-epoch_length_updates = 100
-eval_episodes = 1
-stats_interval_ms = 200
-
-[executor]
-batch_transitions = 16
-max_episode_steps = 60
-report_interval_ms = 50
-stats_interval_ms = 200
-"#;
+        let config = include_str!("../../deploy/configs/tiny.toml");
         Spec { run_id: run_id.into(), executors, config: config.into() }
     }
 }
