@@ -2,6 +2,7 @@
 //! networks the learner trains) and the task and seed from `[train]`.
 
 use agent::AgentConfig;
+use node::RunKeys;
 use serde::Deserialize;
 use sim::Task;
 
@@ -37,22 +38,6 @@ impl Default for ExecutorSettings {
             max_episode_steps: None,
             stats_interval_ms: 1000,
         }
-    }
-}
-
-/// The `[train]` keys an executor reads (the rest of the table belongs to the single-machine loop).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(default)]
-pub struct RunKeys {
-    /// Task name (`ant-v5`, `ant-rllab`, `inverted-pendulum`). Default `ant-v5`.
-    pub task: String,
-    /// The run's seed; executor i derives its own streams from (seed, i).
-    pub seed: u64,
-}
-
-impl Default for RunKeys {
-    fn default() -> Self {
-        Self { task: "ant-v5".into(), seed: 1 }
     }
 }
 
@@ -95,7 +80,7 @@ impl node::RoleConfig for ExecutorConfig {
             ("weights_timeout_ms", s.weights_timeout_ms),
             ("stats_interval_ms", s.stats_interval_ms),
         ];
-        if let Some((key, _)) = positive.iter().find(|(_, v)| *v == 0) {
+        if let Some(key) = node::config::first_zero(&positive) {
             return Err(format!("[executor] {key} must be > 0"));
         }
         if s.batch_transitions as usize > proto::MAX_BATCH_LEN {

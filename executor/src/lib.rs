@@ -39,7 +39,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use agent::{Actor, ParamSnapshot};
-pub use config::{ExecutorConfig, ExecutorSettings, RunKeys};
+pub use config::{ExecutorConfig, ExecutorSettings};
 pub use inbox::{Control, Inbox};
 use node::{Bus, Rejects, Shutdown};
 use proto::{GlobalStep, WeightsSnapshot, topics};

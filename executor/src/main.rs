@@ -12,9 +12,7 @@ struct Args {
 }
 
 fn main() -> anyhow::Result<()> {
-    node::single_threaded_numerics();
     let args = Args::parse();
-    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
-    runtime.block_on(node::launch(proto::Role::Executor, &args.node, executor::run))?;
+    node::main(proto::Role::Executor, &args.node, executor::run)?;
     Ok(())
 }

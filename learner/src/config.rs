@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use agent::{AgentConfig, Backend};
+use node::RunKeys;
 use serde::Deserialize;
 use sim::Task;
 
@@ -61,22 +62,6 @@ impl Default for LearnerSettings {
     }
 }
 
-/// The `[train]` keys the learner reads (the rest of the table belongs to the single-machine loop).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(default)]
-pub struct RunKeys {
-    /// Task name; the learner evaluates on it and takes the networks' dimensions from it.
-    pub task: String,
-    /// The run's seed (networks, latent noise, evaluation resets).
-    pub seed: u64,
-}
-
-impl Default for RunKeys {
-    fn default() -> Self {
-        Self { task: "ant-v5".into(), seed: 1 }
-    }
-}
-
 /// Everything the learner reads from the run file.
 #[derive(Debug, Clone, PartialEq, Deserialize, Default)]
 #[serde(default)]
@@ -117,7 +102,7 @@ impl node::RoleConfig for LearnerConfig {
             ("epoch_length_updates", s.epoch_length_updates),
             ("stats_interval_ms", s.stats_interval_ms),
         ];
-        if let Some((key, _)) = positive.iter().find(|(_, v)| *v == 0) {
+        if let Some(key) = node::config::first_zero(&positive) {
             return Err(format!("[learner] {key} must be > 0"));
         }
         if s.prefetch_batches > 64 {

@@ -44,7 +44,7 @@ use std::time::{Duration, Instant};
 use agent::{Actor, AnyLearner, ParamSnapshot};
 pub use batch::Sampled;
 pub use checkpoint::CheckpointDir;
-pub use config::{LearnerConfig, LearnerSettings, RunKeys};
+pub use config::{LearnerConfig, LearnerSettings};
 pub use evaluate::{Evaluation, evaluate};
 pub use fetch::{FetchStatus, Fetcher, Requests};
 use node::{Bus, Shutdown};

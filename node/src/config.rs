@@ -23,6 +23,28 @@ pub trait RoleConfig: DeserializeOwned + Default {
     }
 }
 
+/// The `[train]` keys every distributed role that simulates or trains reads (the rest of the table
+/// belongs to the single-machine loop, so unknown keys are ignored here).
+#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+#[serde(default)]
+pub struct RunKeys {
+    /// Task name (`ant-v5`, `ant-rllab`, `inverted-pendulum`). Default `ant-v5`.
+    pub task: String,
+    /// The run's seed; every process derives its own streams from it.
+    pub seed: u64,
+}
+
+impl Default for RunKeys {
+    fn default() -> Self {
+        Self { task: "ant-v5".into(), seed: 1 }
+    }
+}
+
+/// The first `(key, value)` whose value is 0, for "must be > 0" checks in `validate()`.
+pub fn first_zero<'a>(values: &[(&'a str, u64)]) -> Option<&'a str> {
+    values.iter().find(|(_, v)| *v == 0).map(|(key, _)| *key)
+}
+
 /// Loads and validates `T`'s table from `path` (defaults when there is no file or no table).
 pub fn load<T: RoleConfig>(path: Option<&Path>) -> Result<T, NodeError> {
     let config = match path {

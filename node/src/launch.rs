@@ -31,6 +31,21 @@ where
     Ok(report)
 }
 
+/// The whole `main` of a role binary: single-threaded numerics, a tokio runtime with two workers
+/// (the role's CPU-heavy loop has a thread of its own; the async shell only moves messages), then
+/// [`launch`].
+pub fn main<C, F, Fut, R>(role: Role, args: &NodeArgs, run: F) -> anyhow::Result<R>
+where
+    C: RoleConfig,
+    F: FnOnce(C, Bus, Shutdown) -> Fut,
+    Fut: Future<Output = anyhow::Result<R>>,
+    R: Debug,
+{
+    single_threaded_numerics();
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
+    runtime.block_on(launch(role, args, run))
+}
+
 /// Makes candle and rayon single-threaded unless `RAYON_NUM_THREADS` says otherwise. Call it first
 /// thing in `main`, before any thread exists (it sets an environment variable).
 ///

@@ -74,9 +74,17 @@ impl Barrier {
         new
     }
 
-    /// An executor reported its progress; it joins if it was not known.
-    pub fn report(&mut self, report: BarrierReport) {
-        self.executors.insert(report.executor_id, Some(report));
+    /// An executor reported its progress. Only live executors (liveliness is the source of truth)
+    /// are updated: a report still in flight when its sender died must not bring it back. Returns
+    /// whether it was taken.
+    pub fn report(&mut self, report: BarrierReport) -> bool {
+        match self.executors.get_mut(&report.executor_id) {
+            Some(slot) => {
+                *slot = Some(report);
+                true
+            }
+            None => false,
+        }
     }
 
     /// An executor died or left: it no longer counts for the warm-up share. Returns whether it was known.
@@ -178,12 +186,14 @@ mod tests {
     fn a_dead_executor_never_holds_the_others_back() {
         let mut b = Barrier::new(rule(1, 90, None));
         for id in 0..3 {
-            b.report(report(id, 30));
+            b.joined(id);
+            assert!(b.report(report(id, 30)));
         }
         // All three used their warm-up share; the learner cannot start until 90 are stored.
         assert_eq!(b.announcement().allowance(0), 30);
         assert!(b.left(2));
         assert!(!b.left(2));
+        assert!(!b.report(report(2, 31)), "a late report from the dead does not revive it");
         // Two live executors now share the 90: each may go to 45.
         assert_eq!(b.announcement().allowance(0), 45);
         assert_eq!(b.announcement().live_executors, 2);
@@ -220,6 +230,8 @@ mod tests {
     fn a_refill_raises_every_allowance_by_a_share() {
         let mut b = Barrier::new(rule(1, 100, None));
         assert!(!b.all_blocked(), "no executors: nobody to unblock");
+        b.joined(0);
+        b.joined(1);
         b.report(BarrierReport { blocked: true, ..report(0, 50) });
         b.report(report(1, 50));
         assert!(!b.all_blocked());

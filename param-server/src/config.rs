@@ -58,7 +58,7 @@ impl node::RoleConfig for ParamServerConfig {
             ("announce_interval_ms", self.announce_interval_ms),
             ("stats_interval_ms", self.stats_interval_ms),
         ];
-        if let Some((key, _)) = positive.iter().find(|(_, v)| *v == 0) {
+        if let Some(key) = node::config::first_zero(&positive) {
             return Err(format!("{key} must be > 0"));
         }
         Ok(())

@@ -11,9 +11,8 @@ struct Args {
     node: NodeArgs,
 }
 
-#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
-async fn main() -> anyhow::Result<()> {
+fn main() -> anyhow::Result<()> {
     let args = Args::parse();
-    node::launch(proto::Role::Param, &args.node, param_server::run).await?;
+    node::main(proto::Role::Param, &args.node, param_server::run)?;
     Ok(())
 }

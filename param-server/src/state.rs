@@ -18,6 +18,9 @@ pub struct StateCounts {
     pub learner_steps: u64,
     /// Barrier reports received.
     pub barrier_reports: u64,
+    /// Reports from executors not (or no longer) alive, ignored: sent just before dying, or before
+    /// the sender's liveliness token arrived.
+    pub reports_from_unknown: u64,
     /// Executors seen joining, and leaving (liveliness).
     pub executors_joined: u64,
     /// Executors seen leaving or dying.
@@ -112,7 +115,9 @@ impl State {
         match proto::decode::<BarrierReport>(bytes) {
             Ok(report) if key_id == Some(report.executor_id) => {
                 self.counts.barrier_reports += 1;
-                self.barrier.report(report);
+                if !self.barrier.report(report) {
+                    self.counts.reports_from_unknown += 1;
+                }
             }
             Ok(report) => {
                 let detail = format!("report of executor {} on key {key_id:?}", report.executor_id);

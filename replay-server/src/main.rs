@@ -11,9 +11,8 @@ struct Args {
     node: NodeArgs,
 }
 
-#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
-async fn main() -> anyhow::Result<()> {
+fn main() -> anyhow::Result<()> {
     let args = Args::parse();
-    node::launch(proto::Role::Replay, &args.node, replay_server::run).await?;
+    node::main(proto::Role::Replay, &args.node, replay_server::run)?;
     Ok(())
 }

@@ -14,11 +14,12 @@
 
 use std::collections::BTreeMap;
 use std::future::Future;
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow, bail};
 use node::{Bus, BusConfig, RoleConfig, Shutdown, ShutdownTrigger};
-use proto::{GlobalStep, LearnerStep, NodeId, Role, RunId, topics};
+use proto::{GlobalStep, LearnerStep, Message, NodeId, Role, RunId, topics};
 use tokio::task::JoinHandle;
 
 /// The longest any single wait of the harness may take.
@@ -72,6 +73,30 @@ impl<R> Running<R> {
     async fn stop(self, what: &str) -> Result<R> {
         self.trigger.fire();
         within(what, WAIT, self.task).await?.with_context(|| format!("{what} panicked"))?
+    }
+}
+
+/// Messages gathered by [`Cluster::collect`].
+#[derive(Debug)]
+pub struct Collected<M> {
+    messages: Arc<Mutex<Vec<M>>>,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+}
+
+impl<M: Clone> Collected<M> {
+    /// A copy of what arrived so far.
+    pub fn snapshot(&self) -> Vec<M> {
+        self.messages.lock().unwrap_or_else(PoisonError::into_inner).clone()
+    }
+
+    /// Waits until what arrived satisfies `pred`.
+    pub async fn wait_until(&self, what: &str, pred: impl Fn(&[M]) -> bool) -> Result<()> {
+        within(what, WAIT, async {
+            while !pred(&self.snapshot()) {
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+        })
+        .await
     }
 }
 
@@ -218,25 +243,27 @@ impl Cluster {
         .await
     }
 
-    /// Waits until the learner reports a step of at least `step` on `control/learner`.
-    pub async fn wait_for_learner_step(&self, step: u64) -> Result<u64> {
-        let sub = self
-            .observer
-            .session()
-            .declare_subscriber(topics::control_learner(&self.run))
-            .await
-            .map_err(node::NodeError::zenoh)?;
-        within(&format!("learner step {step}"), WAIT, async {
+    /// Waits until a message on `key` satisfies `pred`; returns it.
+    pub async fn wait_for<M: Message>(&self, what: &str, key: &str, pred: impl Fn(&M) -> bool) -> Result<M> {
+        let sub = self.observer.session().declare_subscriber(key).await.map_err(node::NodeError::zenoh)?;
+        within(what, WAIT, async {
             loop {
                 let sample = sub.recv_async().await.map_err(|e| anyhow!("{e}"))?;
-                if let Ok(s) = proto::decode::<LearnerStep>(&sample.payload().to_bytes())
-                    && s.learner_step >= step
+                if let Ok(message) = proto::decode::<M>(&sample.payload().to_bytes())
+                    && pred(&message)
                 {
-                    return Ok(s.learner_step);
+                    return Ok(message);
                 }
             }
         })
         .await?
+    }
+
+    /// Waits until the learner reports a step of at least `step` on `control/learner`.
+    pub async fn wait_for_learner_step(&self, step: u64) -> Result<u64> {
+        let (key, what) = (topics::control_learner(&self.run), format!("learner step {step}"));
+        let reached = self.wait_for::<LearnerStep>(&what, &key, |s| s.learner_step >= step).await?;
+        Ok(reached.learner_step)
     }
 
     /// Waits until a `control/step` announcement satisfies `pred`; returns it.
@@ -245,23 +272,25 @@ impl Cluster {
         what: &str,
         pred: impl Fn(&GlobalStep) -> bool,
     ) -> Result<GlobalStep> {
-        let sub = self
+        self.wait_for(what, &topics::control_step(&self.run), pred).await
+    }
+
+    /// Collects every decodable message on `key` from now on, until the returned value is dropped.
+    pub async fn collect<M: Message + Send + 'static>(&self, key: &str) -> Result<Collected<M>> {
+        let messages: Arc<Mutex<Vec<M>>> = Arc::default();
+        let sink = messages.clone();
+        let subscriber = self
             .observer
             .session()
-            .declare_subscriber(topics::control_step(&self.run))
+            .declare_subscriber(key)
+            .callback(move |sample| {
+                if let Ok(message) = proto::decode::<M>(&sample.payload().to_bytes()) {
+                    sink.lock().unwrap_or_else(PoisonError::into_inner).push(message);
+                }
+            })
             .await
             .map_err(node::NodeError::zenoh)?;
-        within(what, WAIT, async {
-            loop {
-                let sample = sub.recv_async().await.map_err(|e| anyhow!("{e}"))?;
-                if let Ok(s) = proto::decode::<GlobalStep>(&sample.payload().to_bytes())
-                    && pred(&s)
-                {
-                    return Ok(s);
-                }
-            }
-        })
-        .await?
+        Ok(Collected { messages, _subscriber: subscriber })
     }
 
     /// Stops every role (executors first, the replay server last) and returns their reports.

@@ -3,42 +3,16 @@
 //! executor (from their own reports), killing an executor does not stop the learner, a late joiner
 //! starts from the current weights, and shutdown completes within a deadline.
 
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use cluster::{Cluster, Spec, WAIT, within};
+use cluster::{Cluster, Spec, within};
 use proto::{BarrierReport, EvalReport, topics};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn roles_train_together_and_survive_a_dead_executor() -> anyhow::Result<()> {
     let mut cluster = Cluster::start(Spec::tiny("cluster-smoke", 2)).await?;
-    let reports: Arc<Mutex<Vec<BarrierReport>>> = Arc::default();
-    let sink = reports.clone();
-    let _barrier_sub = cluster
-        .observer
-        .session()
-        .declare_subscriber(topics::control_barrier_all(cluster.run()))
-        .callback(move |sample| {
-            if let Ok(r) = proto::decode::<BarrierReport>(&sample.payload().to_bytes()) {
-                sink.lock().unwrap().push(r);
-            }
-        })
-        .await
-        .map_err(node::NodeError::zenoh)?;
-
-    let evals: Arc<Mutex<Vec<EvalReport>>> = Arc::default();
-    let eval_sink = evals.clone();
-    let _eval_sub = cluster
-        .observer
-        .session()
-        .declare_subscriber(topics::evaluation(cluster.run()))
-        .callback(move |sample| {
-            if let Ok(r) = proto::decode::<EvalReport>(&sample.payload().to_bytes()) {
-                eval_sink.lock().unwrap().push(r);
-            }
-        })
-        .await
-        .map_err(node::NodeError::zenoh)?;
+    let barrier = cluster.collect::<BarrierReport>(&topics::control_barrier_all(cluster.run())).await?;
+    let evals = cluster.collect::<EvalReport>(&topics::evaluation(cluster.run())).await?;
 
     // The warm-up (300 transitions, 150 each) fills the replay minimum (200), then updates flow.
     cluster.wait_for_learner_step(150).await?;
@@ -54,32 +28,19 @@ async fn roles_train_together_and_survive_a_dead_executor() -> anyhow::Result<()
     // A late joiner gets the current weights, not version 0.
     cluster.start_executor(2).await?;
     let joined_at = after_kill.learner_step;
-    let sink = reports.clone();
-    within("executor 2 to act with current weights", WAIT, async move {
-        loop {
-            let fresh =
-                sink.lock().unwrap().iter().any(|r| r.executor_id == 2 && r.weights_version >= joined_at);
-            if fresh {
-                return;
-            }
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
-    })
-    .await?;
+    barrier
+        .wait_until("executor 2 to act with current weights", |rs| {
+            rs.iter().any(|r| r.executor_id == 2 && r.weights_version >= joined_at)
+        })
+        .await?;
     let last_step = cluster.wait_for_learner_step(after_kill.learner_step + 300).await?;
-    let seen = evals.clone();
-    within("an evaluation (one per 100-update epoch)", WAIT, async move {
-        while seen.lock().unwrap().is_empty() {
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
-    })
-    .await?;
+    evals.wait_until("an evaluation (one per 100-update epoch)", |e| !e.is_empty()).await?;
 
     let stopped = within("the whole cluster to stop", Duration::from_secs(60), cluster.stop()).await??;
     let learner = &stopped.learner;
     assert!(learner.updater.final_step >= last_step, "{:?}", learner.updater);
     assert!(learner.updater.weights_published >= 2);
-    let first_eval = evals.lock().unwrap()[0];
+    let first_eval = evals.snapshot()[0];
     assert!(first_eval.epoch >= 1 && first_eval.learner_step == first_eval.epoch * 100, "{first_eval:?}");
     assert!(first_eval.mean_length >= 1.0 && first_eval.mean_return.is_finite());
     assert!(stopped.replay.counters.inserted_transitions >= 300);
@@ -93,7 +54,7 @@ async fn roles_train_together_and_survive_a_dead_executor() -> anyhow::Result<()
     }
 
     // The barrier bound, from every report any executor sent.
-    let reports = reports.lock().unwrap();
+    let reports = barrier.snapshot();
     assert!(reports.len() > 20, "only {} barrier reports", reports.len());
     let k = 1;
     for r in reports.iter() {

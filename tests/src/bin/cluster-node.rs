@@ -26,18 +26,12 @@ struct Args {
 }
 
 fn main() -> anyhow::Result<()> {
-    node::single_threaded_numerics();
     let args = Args::parse();
-    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
-    runtime.block_on(run(args))
-}
-
-async fn run(args: Args) -> anyhow::Result<()> {
     let n = &args.node;
     match args.role {
-        Which::Replay => node::launch(Role::Replay, n, replay_server::run).await.map(drop),
-        Which::Param => node::launch(Role::Param, n, param_server::run).await.map(drop),
-        Which::Learner => node::launch(Role::Learner, n, learner::run).await.map(drop),
-        Which::Executor => node::launch(Role::Executor, n, executor::run).await.map(drop),
+        Which::Replay => node::main(Role::Replay, n, replay_server::run).map(drop),
+        Which::Param => node::main(Role::Param, n, param_server::run).map(drop),
+        Which::Learner => node::main(Role::Learner, n, learner::run).map(drop),
+        Which::Executor => node::main(Role::Executor, n, executor::run).map(drop),
     }
 }
