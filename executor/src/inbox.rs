@@ -2,7 +2,7 @@
 //! behind one mutex and a condition variable the thread sleeps on while it waits at the barrier.
 
 use std::sync::{Condvar, Mutex, MutexGuard, PoisonError};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use agent::ParamSnapshot;
 use proto::GlobalStep;
@@ -18,6 +18,23 @@ pub struct Control {
     pub stop: bool,
     /// Bumped on every change, so a waiter knows whether it woke for something.
     pub generation: u64,
+    /// When the last announcement arrived (changed or not): the param server's heartbeat.
+    pub heard_at: Option<Instant>,
+}
+
+/// What the thread takes out of the inbox before each step.
+#[derive(Debug)]
+pub struct Taken {
+    /// The newest announcement.
+    pub step: Option<GlobalStep>,
+    /// Weights to load, if new ones arrived.
+    pub weights: Option<ParamSnapshot>,
+    /// Stop requested.
+    pub stop: bool,
+    /// The generation, for [`Inbox::wait_for_change`].
+    pub generation: u64,
+    /// When the last announcement arrived.
+    pub heard_at: Option<Instant>,
 }
 
 /// Shell → thread mailbox.
@@ -43,6 +60,7 @@ impl Inbox {
     /// lower step until the learner reports again, and executors must not read that as a reset.
     pub fn set_step(&self, mut step: GlobalStep) {
         let mut control = self.lock();
+        control.heard_at = Some(Instant::now());
         if let Some(old) = control.step {
             step.learner_step = step.learner_step.max(old.learner_step);
         }
@@ -71,11 +89,17 @@ impl Inbox {
         self.changed(control);
     }
 
-    /// The current step, the weights to load (taken out), whether to stop, and the generation.
-    pub fn take(&self) -> (Option<GlobalStep>, Option<ParamSnapshot>, bool, u64) {
+    /// The current state, with the weights to load taken out.
+    pub fn take(&self) -> Taken {
         let mut control = self.lock();
         let weights = control.weights.take();
-        (control.step, weights, control.stop, control.generation)
+        Taken {
+            step: control.step,
+            weights,
+            stop: control.stop,
+            generation: control.generation,
+            heard_at: control.heard_at,
+        }
     }
 
     /// Sleeps until something changes after `seen` or `timeout` passes.
@@ -108,8 +132,9 @@ mod tests {
         let inbox = Inbox::default();
         inbox.set_step(step(10, 5));
         inbox.set_step(step(3, 7));
-        let (s, _, _, _) = inbox.take();
-        assert_eq!(s, Some(step(10, 7)));
+        let taken = inbox.take();
+        assert_eq!(taken.step, Some(step(10, 7)));
+        assert!(taken.heard_at.is_some());
     }
 
     #[test]
@@ -117,13 +142,14 @@ mod tests {
         let inbox = std::sync::Arc::new(Inbox::default());
         assert!(inbox.set_weights(ParamSnapshot { version: 5, safetensors: vec![] }));
         assert!(!inbox.set_weights(ParamSnapshot { version: 4, safetensors: vec![] }));
-        let (_, w, stop, seen) = inbox.take();
-        assert_eq!(w.map(|w| w.version), Some(5));
-        assert!(!stop);
+        let taken = inbox.take();
+        assert_eq!(taken.weights.map(|w| w.version), Some(5));
+        assert!(!taken.stop);
+        let seen = taken.generation;
         let other = inbox.clone();
         let waiter = std::thread::spawn(move || other.wait_for_change(seen, Duration::from_secs(30)));
         inbox.stop();
         waiter.join().unwrap();
-        assert!(inbox.take().2);
+        assert!(inbox.take().stop);
     }
 }

@@ -40,7 +40,7 @@ use std::time::Duration;
 
 use agent::{Actor, ParamSnapshot};
 pub use config::{ExecutorConfig, ExecutorSettings};
-pub use inbox::{Control, Inbox};
+pub use inbox::{Control, Inbox, Taken};
 use node::{Bus, Rejects, Shutdown};
 use proto::{GlobalStep, WeightsSnapshot, topics};
 pub use rollout::{Rollout, StepOutcome};

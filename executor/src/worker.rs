@@ -25,6 +25,11 @@ pub enum Wait {
         /// Oldest allowed.
         min: u64,
     },
+    /// It used its allowance and no announcement has come for a while: the param server is silent.
+    ParamServerSilent {
+        /// Seconds since the last announcement.
+        silent_s: u64,
+    },
     /// It used its allowance; the learner must step first.
     Barrier {
         /// Its env steps.
@@ -40,7 +45,7 @@ impl Wait {
     /// What waits, as a metric-style name.
     pub fn what(&self) -> &'static str {
         match self {
-            Wait::NoGlobalStep => "executor/global_step",
+            Wait::NoGlobalStep | Wait::ParamServerSilent { .. } => "executor/global_step",
             Wait::NoWeights | Wait::StaleWeights { .. } => "executor/weights",
             Wait::Barrier { .. } => "executor/barrier",
         }
@@ -51,6 +56,11 @@ impl Wait {
         match self {
             Wait::NoGlobalStep => "no global step announced yet: is the param server up?".into(),
             Wait::NoWeights => "waiting for the first weights from the param server".into(),
+            Wait::ParamServerSilent { silent_s } => {
+                format!(
+                    "at the barrier, and no global step announced for {silent_s} s: is the param server up?"
+                )
+            }
             Wait::StaleWeights { have, min } => {
                 format!("weights version {have} is older than the allowed {min}")
             }
@@ -138,6 +148,7 @@ struct Worker {
     allowed: u64,
     waiting: Option<(Wait, Instant, u64)>,
     last_return: Option<f64>,
+    heard_at: Option<Instant>,
 }
 
 /// Runs the rollout until the inbox says stop (or the shell goes away); errors end it early.
@@ -160,6 +171,7 @@ pub fn run(
         allowed: 0,
         waiting: None,
         last_return: None,
+        heard_at: None,
     };
     w.run()?;
     Ok(w.report)
@@ -180,8 +192,10 @@ impl Worker {
         let mut versions = std::collections::BTreeSet::new();
         let mut last_warn = None;
         loop {
-            let (step, weights, stop, generation) = self.inbox.take();
-            if stop {
+            let taken = self.inbox.take();
+            let (step, weights, generation) = (taken.step, taken.weights, taken.generation);
+            self.heard_at = taken.heard_at;
+            if taken.stop {
                 break;
             }
             if let Some(snapshot) = weights {
@@ -259,6 +273,10 @@ impl Worker {
         }
         let env_steps = self.rollout.env_steps();
         if env_steps >= self.allowed {
+            let silent = self.heard_at.map_or(Duration::ZERO, |at| at.elapsed());
+            if silent >= Duration::from_millis(self.settings.wait_deadline_ms) {
+                return Some(Wait::ParamServerSilent { silent_s: silent.as_secs() });
+            }
             return Some(Wait::Barrier { env_steps, allowed: self.allowed, learner_step: step.learner_step });
         }
         None
