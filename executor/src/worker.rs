@@ -345,3 +345,74 @@ impl Worker {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use agent::{Actor, AgentConfig, Learner};
+    use sim::Task;
+
+    use super::*;
+
+    fn step(learner_step: u64, share: u64) -> GlobalStep {
+        GlobalStep {
+            learner_step,
+            weights_version: 0,
+            env_steps_per_learner_step: 2,
+            warm_up_share: share,
+            min_weights_version: 0,
+            live_executors: 1,
+        }
+    }
+
+    /// Receives until a barrier report satisfies `pred`, collecting everything else.
+    fn until(rx: &mut mpsc::Receiver<Out>, pred: impl Fn(&BarrierReport) -> bool) -> (BarrierReport, u64) {
+        let mut transitions = 0;
+        loop {
+            match rx.blocking_recv().expect("the worker hung up") {
+                Out::Barrier(r) if pred(&r) => return (r, transitions),
+                Out::Experience(b) => transitions += b.len() as u64,
+                _ => {}
+            }
+        }
+    }
+
+    #[test]
+    fn steps_exactly_to_the_allowance_then_waits_for_the_learner() {
+        let env = Task::InvertedPendulum.make(1).unwrap();
+        let cfg = AgentConfig {
+            critic_hidden: vec![8],
+            embedding_layers: vec![8, 2],
+            ..AgentConfig::for_task(env.spec().obs_dim, env.spec().act_dim)
+        };
+        let weights = Learner::new(cfg.clone(), 1).unwrap().snapshot().unwrap();
+        let rollout = Rollout::new(0, env, Actor::new(cfg, 2).unwrap(), 1);
+        let inbox = Arc::new(Inbox::default());
+        let (tx, mut rx) = mpsc::channel(1024);
+        let settings =
+            ExecutorSettings { batch_transitions: 4, report_interval_ms: 10, ..ExecutorSettings::default() };
+        let worker = {
+            let inbox = inbox.clone();
+            std::thread::spawn(move || run(0, rollout, inbox, tx, settings))
+        };
+        // No step, no weights: it waits without stepping.
+        let (first, _) = until(&mut rx, |r| r.blocked);
+        assert_eq!(first.env_steps, 0);
+        inbox.set_step(step(10, 5));
+        inbox.set_weights(weights);
+        // Joined at learner step 10 with a share of 5: exactly 5 steps, all published, then it waits.
+        let (at_share, sent) = until(&mut rx, |r| r.blocked && r.env_steps > 0);
+        assert_eq!((at_share.env_steps, at_share.allowed_env_steps, at_share.joined_at), (5, 5, 10));
+        assert_eq!(sent, 5, "pending transitions are flushed before waiting");
+        // Three learner steps at k = 2 allow six more.
+        inbox.set_step(step(13, 5));
+        let (next, sent) = until(&mut rx, |r| r.blocked && r.env_steps > 5);
+        assert_eq!((next.env_steps, next.allowed_env_steps, sent), (11, 11, 6));
+        // A newcomer shrinks the share; what was granted stays granted, and nothing more is taken.
+        inbox.set_step(GlobalStep { warm_up_share: 2, live_executors: 2, ..step(13, 5) });
+        inbox.stop();
+        let report = worker.join().unwrap().unwrap();
+        assert_eq!(report.env_steps, 11);
+        assert_eq!(report.max_over_allowance, 0);
+        assert_eq!(report.weights_loads, 1);
+    }
+}
