@@ -52,13 +52,18 @@ fi
 place_learner_threads() {
     local pid=$1 placed=0
     for _ in $(seq 200); do
+        kill -0 "$pid" 2>/dev/null || return 0 # it died; the main loop reports it
         for task in /proc/"$pid"/task/*; do
             case $(cat "$task/comm" 2>/dev/null) in
                 update) [[ $learner_core != none ]] && taskset -p -c "$learner_core" "${task##*/}" >/dev/null && placed=1 ;;
                 evaluate) renice -n "$nice_level" -p "${task##*/}" >/dev/null ;;
             esac
         done
-        [[ $placed == 1 || $learner_core == none ]] && return 0
+        if [[ $placed == 1 ]]; then
+            echo "local.sh: learner update thread on core $learner_core, everything else on $others" >&2
+            return 0
+        fi
+        [[ $learner_core == none ]] && return 0
         sleep 0.05
     done
     echo "local.sh: the learner's update thread did not appear; not pinned" >&2
@@ -100,7 +105,6 @@ start replay-server "${rest[@]}" "$bin/replay-server" "${common[@]}" --listen "$
 start param-server "${rest[@]}" "$bin/param-server" "${common[@]}" "${peer[@]}"
 start learner "${rest[@]}" "$bin/learner" "${common[@]}" "${peer[@]}"
 place_learner_threads "${pids[-1]}"
-[[ $learner_core != none ]] && echo "local.sh: learner update thread on core $learner_core, everything else on ${others}" >&2
 for ((i = 0; i < n; i++)); do
     start_executor "$i"
 done
@@ -129,7 +133,8 @@ while true; do
                 fi
                 echo "local.sh: $name died more than ${EXECUTOR_RESTARTS:-3} times" >&2
             fi
-            tail -n 5 "$dir/$name.log" >&2 || true
+            # The error, not a backtrace: anyhow prints "Error: ..." first.
+            grep -m1 -A3 '^Error' "$dir/$name.log" >&2 || tail -n 5 "$dir/$name.log" >&2 || true
             stop_all
             [[ ${names[$pid]} == learner && $status == 0 ]] && exit 0 # max_updates reached
             exit 1
