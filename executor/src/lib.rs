@@ -23,6 +23,7 @@
 //! | `rollout.rs` | [`Rollout`]: env + actor + pending batch, sans-IO                         |
 //! | `inbox.rs`   | [`Inbox`]: newest step and weights, shell → thread                        |
 //! | `worker.rs`  | the rollout thread: barrier, waits with reasons, loading weights          |
+//! | `weights.rs` | the weights fetch task: a `get` whenever a newer version is announced     |
 //! | `stats.rs`   | the stats report                                                          |
 //!
 //! The environment and the networks run on their own thread; the async shell only moves messages,
@@ -33,18 +34,19 @@ mod config;
 mod inbox;
 mod rollout;
 mod stats;
+mod weights;
 mod worker;
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use agent::{Actor, ParamSnapshot};
+use agent::Actor;
 pub use config::{ExecutorConfig, ExecutorSettings};
 pub use inbox::{Control, Inbox, Taken};
 use node::{Bus, Rejects, Shutdown};
-use proto::{GlobalStep, WeightsSnapshot, topics};
+use proto::{GlobalStep, topics};
 pub use rollout::{Rollout, StepOutcome};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
 pub use worker::{Out, Progress, Wait, WorkerReport};
 use zenoh::qos::CongestionControl;
 
@@ -101,43 +103,34 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
             .spawn(move || worker::run(id, rollout, inbox, out_tx, settings))?
     };
 
-    let mut rejects = Rejects::default();
+    let rejects = Arc::new(Mutex::new(Rejects::default()));
     let mut report = Report::default();
-    let mut held_version: Option<u64> = None;
-    let mut latest: Option<GlobalStep> = None;
-    let mut fetch = tokio::time::interval(Duration::from_millis(500));
-    let weights_timeout = Duration::from_millis(config.executor.weights_timeout_ms);
+    // Weights are fetched on a task of their own, so a slow or absent param server never holds up
+    // publishing (and with it the rollout thread).
+    let (announced_tx, announced_rx) = watch::channel(None);
+    let fetcher = tokio::spawn(weights::fetch_loop(weights::Fetch {
+        bus: bus.clone(),
+        announced: announced_rx,
+        inbox: inbox.clone(),
+        timeout: Duration::from_millis(config.executor.weights_timeout_ms),
+        rejects: rejects.clone(),
+        shutdown: shutdown.clone(),
+    }));
     let mut worker_done = false;
     loop {
-        let want_weights = match (latest, held_version) {
-            (_, None) => true,
-            (Some(step), Some(held)) => step.weights_version > held,
-            (None, Some(_)) => false,
-        };
         tokio::select! {
             _ = shutdown.wait() => break,
             Ok(sample) = step_sub.recv_async() => match proto::decode::<GlobalStep>(&sample.payload().to_bytes()) {
                 Ok(step) => {
-                    latest = Some(step);
                     inbox.set_step(step);
-                    if step.weights_version > held_version.unwrap_or(0) || held_version.is_none() {
-                        fetch.reset_immediately();
-                    }
+                    announced_tx.send_if_modified(|v| {
+                        let changed = *v != Some(step.weights_version);
+                        *v = Some(step.weights_version);
+                        changed
+                    });
                 }
-                Err(error) => rejects.decode_failed("step", &error),
+                Err(error) => lock(&rejects).decode_failed("step", &error),
             },
-            _ = fetch.tick(), if want_weights => {
-                match fetch_weights(&bus, weights_timeout).await {
-                    Ok(Some(snapshot)) if held_version.is_none_or(|h| snapshot.version > h) => {
-                        held_version = Some(snapshot.version);
-                        report.weights_fetched += 1;
-                        inbox.set_weights(ParamSnapshot { version: snapshot.version, safetensors: snapshot.safetensors });
-                    }
-                    Ok(_) => {}
-                    Err(FetchError::Decode(error)) => rejects.decode_failed("weights", &error),
-                    Err(FetchError::Unavailable(why)) => tracing::debug!(%why, "weights not available yet"),
-                }
-            }
             message = out_rx.recv() => match message {
                 Some(message) => publish(&bus, &experience_pub, id, message, &mut report, &rejects).await,
                 None => { worker_done = true; break; }
@@ -157,32 +150,17 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
         Ok(result) => result?,
         Err(_) => anyhow::bail!("the rollout thread panicked"),
     };
+    drop(announced_tx); // ends the fetch task if shutdown has not
+    report.weights_fetched = fetcher.await?;
     report.uptime_s = started.elapsed().as_secs_f64();
-    report.rejected = rejects.counts().clone();
+    report.rejected = lock(&rejects).counts().clone();
     drop((step_sub, experience_pub));
     bus.close().await?;
     Ok(report)
 }
 
-enum FetchError {
-    Decode(proto::DecodeError),
-    Unavailable(String),
-}
-
-/// One `get` of the latest weights.
-async fn fetch_weights(bus: &Bus, timeout: Duration) -> Result<Option<WeightsSnapshot>, FetchError> {
-    let key = topics::params_weights(bus.run());
-    let replies =
-        bus.session().get(&key).timeout(timeout).await.map_err(|e| FetchError::Unavailable(e.to_string()))?;
-    match replies.recv_async().await {
-        Ok(reply) => match reply.result() {
-            Ok(sample) => proto::decode(&sample.payload().to_bytes()).map(Some).map_err(FetchError::Decode),
-            Err(error) => {
-                Err(FetchError::Unavailable(String::from_utf8_lossy(&error.payload().to_bytes()).into()))
-            }
-        },
-        Err(_) => Ok(None),
-    }
+fn lock(rejects: &Mutex<Rejects>) -> std::sync::MutexGuard<'_, Rejects> {
+    rejects.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 async fn publish(
@@ -191,7 +169,7 @@ async fn publish(
     id: u32,
     message: Out,
     report: &mut Report,
-    rejects: &Rejects,
+    rejects: &Mutex<Rejects>,
 ) {
     let run = bus.run();
     let result = match message {
@@ -201,7 +179,10 @@ async fn publish(
         }
         Out::Episode(episode) => bus.put(&topics::episodes(run, id), &episode).await,
         Out::Barrier(barrier) => bus.put(&topics::control_barrier(run, id), &barrier).await,
-        Out::Progress(progress) => bus.put_stats(&stats::report(bus.node(), &progress, rejects)).await,
+        Out::Progress(progress) => {
+            let stats = stats::report(bus.node(), &progress, &lock(rejects));
+            bus.put_stats(&stats).await
+        }
     };
     if let Err(error) = result {
         tracing::warn!(%error, "publish failed");

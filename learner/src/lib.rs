@@ -26,6 +26,7 @@
 //! | `updater.rs`    | [`Updater`]: the update thread                                  |
 //! | `evaluate.rs`   | [`evaluate`]: deterministic evaluation episodes                 |
 //! | `checkpoint.rs` | [`CheckpointDir`]: atomic checkpoint files, resume              |
+//! | `outbox.rs`     | publishing; the newest weights are re-sent to a late param server |
 //! | `stats.rs`      | the stats report                                                |
 #![deny(missing_docs)]
 
@@ -34,6 +35,7 @@ mod checkpoint;
 mod config;
 mod evaluate;
 mod fetch;
+mod outbox;
 mod stats;
 mod updater;
 
@@ -64,6 +66,8 @@ pub struct Report {
     pub updater: UpdaterReport,
     /// Evaluations completed.
     pub evaluations: Vec<EvalReport>,
+    /// Times the newest weights were sent again because a param server started listening.
+    pub weights_resent: u64,
     /// The prefetch pipeline's counters.
     pub fetch: FetchStatus,
 }
@@ -118,9 +122,8 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
         .collect();
     drop(batch_tx);
 
-    let mut evaluations = Vec::new();
+    let (mut outbox, matching) = outbox::Outbox::new(bus.clone()).await?;
     let mut starved_check = tokio::time::interval(STARVED_AFTER / 2);
-    let mut weights_version = 0;
     loop {
         tokio::select! {
             _ = shutdown.wait() => break,
@@ -131,7 +134,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
                 if waiting_ms >= STARVED_AFTER.as_millis() as u64 {
                     let message = proto::LearnerStep {
                         learner_step: step.load(std::sync::atomic::Ordering::Relaxed),
-                        weights_version,
+                        weights_version: outbox.weights_version,
                         starved: true,
                     };
                     if let Err(error) = bus.put(&topics::control_learner(bus.run()), &message).await {
@@ -139,13 +142,11 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
                     }
                 }
             }
+            Ok(status) = matching.recv_async() => if status.matching() {
+                outbox.resend_weights().await;
+            },
             message = out_rx.recv() => match message {
-                Some(message) => {
-                    if let Out::Step(s) = &message {
-                        weights_version = s.weights_version;
-                    }
-                    publish(&bus, message, &fetcher, &mut evaluations).await
-                }
+                Some(message) => outbox.send(message, &fetcher).await,
                 None => break,
             },
         }
@@ -158,7 +159,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     let deadline = Instant::now() + Duration::from_secs(30);
     while !update_thread.is_finished() {
         match tokio::time::timeout_at(deadline.into(), out_rx.recv()).await {
-            Ok(Some(message)) => publish(&bus, message, &fetcher, &mut evaluations).await,
+            Ok(Some(message)) => outbox.send(message, &fetcher).await,
             Ok(None) => tokio::time::sleep(Duration::from_millis(5)).await,
             Err(_) => anyhow::bail!("the update thread did not stop within 30 s"),
         }
@@ -168,10 +169,16 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
         Err(_) => anyhow::bail!("the update thread panicked"),
     };
     while let Ok(message) = out_rx.try_recv() {
-        publish(&bus, message, &fetcher, &mut evaluations).await;
+        outbox.send(message, &fetcher).await;
     }
-    let report =
-        Report { uptime_s: started.elapsed().as_secs_f64(), updater, evaluations, fetch: fetcher.status() };
+    let report = Report {
+        uptime_s: started.elapsed().as_secs_f64(),
+        updater,
+        weights_resent: outbox.weights_resent,
+        evaluations: std::mem::take(&mut outbox.evaluations),
+        fetch: fetcher.status(),
+    };
+    drop((outbox, matching));
     bus.close().await?;
     Ok(report)
 }
@@ -206,25 +213,5 @@ fn evaluation_thread(
             }
             Err(error) => tracing::error!(%error, "evaluation failed"),
         }
-    }
-}
-
-async fn publish(bus: &Bus, message: Out, fetcher: &Fetcher, evaluations: &mut Vec<EvalReport>) {
-    let run = bus.run();
-    let result = match message {
-        Out::Priorities(update) => bus.put(&topics::replay_priorities(run), &update).await,
-        Out::Step(step) => bus.put(&topics::control_learner(run), &step).await,
-        Out::Weights(weights) => bus.put(&topics::params_publish(run), &weights).await,
-        Out::Eval(report) => {
-            evaluations.push(report);
-            bus.put(&topics::evaluation(run), &report).await
-        }
-        Out::Progress(progress) => {
-            let last_eval = evaluations.last().copied();
-            bus.put_stats(&stats::report(bus.node(), &progress, &fetcher.status(), last_eval)).await
-        }
-    };
-    if let Err(error) = result {
-        tracing::warn!(%error, "publish failed");
     }
 }

@@ -102,9 +102,12 @@ impl Barrier {
         self.executors.iter().map(|(id, report)| (*id, report.as_ref()))
     }
 
-    /// Whether every live executor's latest report says it waits (and at least one is known).
-    pub fn all_blocked(&self) -> bool {
-        !self.executors.is_empty() && self.executors.values().all(|r| r.is_some_and(|r| r.blocked))
+    /// Whether every live executor's latest report says it waits at the barrier, i.e. has used its
+    /// allowance (and at least one is known). Waiting for weights does not count: a refill would
+    /// not help it.
+    pub fn all_at_barrier(&self) -> bool {
+        let at_barrier = |r: &BarrierReport| r.blocked && r.env_steps >= r.allowed_env_steps;
+        !self.executors.is_empty() && self.executors.values().all(|r| r.as_ref().is_some_and(at_barrier))
     }
 
     /// Grants every executor another warm-up share: what a starved learner needs when the replay
@@ -229,14 +232,16 @@ mod tests {
     #[test]
     fn a_refill_raises_every_allowance_by_a_share() {
         let mut b = Barrier::new(rule(1, 100, None));
-        assert!(!b.all_blocked(), "no executors: nobody to unblock");
+        assert!(!b.all_at_barrier(), "no executors: nobody to unblock");
         b.joined(0);
         b.joined(1);
         b.report(BarrierReport { blocked: true, ..report(0, 50) });
         b.report(report(1, 50));
-        assert!(!b.all_blocked());
+        assert!(!b.all_at_barrier());
+        b.report(BarrierReport { blocked: true, allowed_env_steps: 60, ..report(1, 50) });
+        assert!(!b.all_at_barrier(), "blocked below its allowance: waiting for weights, not the learner");
         b.report(BarrierReport { blocked: true, ..report(1, 50) });
-        assert!(b.all_blocked());
+        assert!(b.all_at_barrier());
         b.learner_step(7);
         assert_eq!(b.refill(), 50);
         assert_eq!(b.announcement().allowance(0), 50 + 50 + 7);

@@ -150,7 +150,7 @@ impl State {
     pub fn break_starvation(&mut self) -> bool {
         let Some(since) = self.starved_since else { return false };
         let due = self.refilled_at.is_none_or(|at| at.elapsed() >= REFILL_AFTER);
-        if since.elapsed() < REFILL_AFTER || !due || !self.barrier.all_blocked() {
+        if since.elapsed() < REFILL_AFTER || !due || !self.barrier.all_at_barrier() {
             return false;
         }
         let share = self.barrier.refill();
