@@ -159,6 +159,7 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
     Ok(report)
 }
 
+/// The shared rejection counts (a panicking holder leaves plain counters behind: keep them).
 fn lock(rejects: &Mutex<Rejects>) -> std::sync::MutexGuard<'_, Rejects> {
     rejects.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }

@@ -124,10 +124,9 @@ pub struct WorkerReport {
     pub episodes: u64,
     /// Batches handed to the shell.
     pub batches: u64,
-    /// Weight loads (the first one included).
+    /// Weight loads (the first one included); each is a newer version than the last (the inbox and
+    /// the fetch task only pass newer ones on), so this is also the number of versions acted with.
     pub weights_loads: u64,
-    /// Distinct weight versions acted with.
-    pub weights_versions_seen: u64,
     /// Non-finite steps dropped.
     pub dropped_non_finite: u64,
     /// Total time waiting, ms.
@@ -189,7 +188,6 @@ impl Worker {
         let deadline = Duration::from_millis(self.settings.wait_deadline_ms);
         let (mut last_report, mut last_stats) = (Instant::now(), Instant::now());
         let mut steps_at_stats = 0;
-        let mut versions = std::collections::BTreeSet::new();
         let mut last_warn = None;
         loop {
             let taken = self.inbox.take();
@@ -201,7 +199,6 @@ impl Worker {
             if let Some(snapshot) = weights {
                 self.rollout.load(&snapshot)?;
                 self.report.weights_loads += 1;
-                versions.insert(snapshot.version);
             }
             self.step = step;
             let wait = self.check();
@@ -246,7 +243,6 @@ impl Worker {
                 let env_steps = self.rollout.env_steps();
                 let rate = (env_steps - steps_at_stats) as f64 / seconds;
                 steps_at_stats = env_steps;
-                self.report.weights_versions_seen = versions.len() as u64;
                 if !self.send(Out::Progress(Box::new(self.progress(rate)))) {
                     break;
                 }
@@ -254,7 +250,6 @@ impl Worker {
         }
         self.flush()?;
         self.report.env_steps = self.rollout.env_steps();
-        self.report.weights_versions_seen = versions.len() as u64;
         if let Some((_, since, _)) = self.waiting.take() {
             self.report.blocked_ms_total += since.elapsed().as_millis() as u64;
         }

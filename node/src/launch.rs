@@ -46,13 +46,13 @@ where
     runtime.block_on(launch(role, args, run))
 }
 
-/// Makes candle and rayon single-threaded unless `RAYON_NUM_THREADS` says otherwise. Call it first
-/// thing in `main`, before any thread exists (it sets an environment variable).
+/// Makes candle and rayon single-threaded unless `RAYON_NUM_THREADS` says otherwise. Runs first
+/// thing in [`main`], before any thread exists (it sets an environment variable).
 ///
 /// Why: the roles' networks are too small to split across threads (two threads were slower in every
 /// measurement), and candle asks for its thread count on every matmul; without the variable it
 /// re-parses `/proc/cpuinfo` each time, which perf showed as ~17% of an executor's CPU.
-pub fn single_threaded_numerics() {
+fn single_threaded_numerics() {
     if std::env::var_os("RAYON_NUM_THREADS").is_none() {
         // SAFETY: called at the start of `main`, before any other thread could read the environment.
         unsafe { std::env::set_var("RAYON_NUM_THREADS", "1") };

@@ -21,6 +21,6 @@ pub use bus::{Bus, decode_payload};
 pub use clock::unix_ms;
 pub use config::{RoleConfig, RunKeys};
 pub use error::NodeError;
-pub use launch::{launch, main, single_threaded_numerics};
+pub use launch::{launch, main};
 pub use rejects::Rejects;
 pub use shutdown::{Shutdown, ShutdownTrigger};

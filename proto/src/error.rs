@@ -202,3 +202,36 @@ pub enum TopicError {
     #[error("bad id segment {0:?}")]
     BadId(String),
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::MessageKind;
+
+    #[test]
+    fn every_decode_error_has_a_short_reason() {
+        let cases = [
+            (DecodeError::TooShort { needed: 13, found: 2 }, "truncated"),
+            (DecodeError::BadMagic { found: [0, 0] }, "bad_magic"),
+            (DecodeError::UnsupportedVersion { found: 9, expected: 1 }, "bad_version"),
+            (DecodeError::UnknownKind(77), "wrong_kind"),
+            (
+                DecodeError::WrongKind {
+                    found: MessageKind::GlobalStep,
+                    expected: MessageKind::ExperienceBatch,
+                },
+                "wrong_kind",
+            ),
+            (DecodeError::ChecksumMismatch { expected: 1, found: 2 }, "checksum"),
+            (DecodeError::Malformed("x".into()), "malformed"),
+            (DecodeError::Invalid(ValidationError::NonFinite { field: "rewards", index: 0 }), "non_finite"),
+            (
+                DecodeError::Invalid(ValidationError::BadDimension { field: "obs_dim", value: 0, max: 1 }),
+                "dims",
+            ),
+        ];
+        for (error, reason) in cases {
+            assert_eq!(error.reason(), reason, "{error}");
+        }
+    }
+}

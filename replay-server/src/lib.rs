@@ -68,7 +68,7 @@ pub use config::{InitialPriority, MAX_REQUEST_DEADLINE_MS, MAX_TOP_K, MemoryPlan
 pub use limiter::{Blocked, LimiterConfig, LimiterCounters, RateLimiter, Resumed};
 use node::{Bus, RoleConfig, Shutdown};
 pub use pending::{Pending, Waiter};
-pub use rejects::{Input, Rejection, Rejects, decode_reason};
+pub use rejects::{Input, Rejection, Rejects};
 use replay::ReplayBuffer;
 pub use replica::SnapshotLog;
 pub use scan::{CHUNK as SCAN_CHUNK_TRANSITIONS, PriorityDigest, PriorityScan};
@@ -232,7 +232,7 @@ async fn restore(config: &ReplayServerConfig) -> anyhow::Result<Option<(ReplayBu
 /// Writes the shutdown snapshot from the service's own buffer (every task has stopped).
 fn write_final(ctx: &Ctx, path: std::path::PathBuf) -> Result<u64, SnapshotFileError> {
     let mut service = ctx.lock();
-    let sidecar = service.next_sidecar(server::unix_ms());
+    let sidecar = service.next_sidecar(node::unix_ms());
     let mut writer = FileWriter::new(path);
     let times = writer.write(service.buffer(), &sidecar, &AtomicBool::new(false), |_| {})?;
     writer.finish()?;

@@ -24,11 +24,6 @@ impl Input {
     }
 }
 
-/// The short reason for a decode failure (proto's [`DecodeError::reason`]).
-pub fn decode_reason(error: &DecodeError) -> &'static str {
-    error.reason()
-}
-
 /// One refused message: the input, a short reason, and the details for the log.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Rejection {
@@ -43,7 +38,7 @@ pub struct Rejection {
 impl Rejection {
     /// A rejection for a decode error.
     pub fn decode(input: Input, error: &DecodeError) -> Self {
-        Self { input, reason: decode_reason(error), detail: error.to_string() }
+        Self { input, reason: error.reason(), detail: error.to_string() }
     }
 
     /// The counter key, `<input>/<reason>`.
@@ -53,36 +48,3 @@ impl Rejection {
 }
 
 pub use node::Rejects;
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use proto::{MessageKind, ValidationError};
-
-    #[test]
-    fn every_decode_error_has_a_short_reason() {
-        let cases = [
-            (DecodeError::TooShort { needed: 13, found: 2 }, "truncated"),
-            (DecodeError::BadMagic { found: [0, 0] }, "bad_magic"),
-            (DecodeError::UnsupportedVersion { found: 9, expected: 1 }, "bad_version"),
-            (DecodeError::UnknownKind(77), "wrong_kind"),
-            (
-                DecodeError::WrongKind {
-                    found: MessageKind::GlobalStep,
-                    expected: MessageKind::ExperienceBatch,
-                },
-                "wrong_kind",
-            ),
-            (DecodeError::ChecksumMismatch { expected: 1, found: 2 }, "checksum"),
-            (DecodeError::Malformed("x".into()), "malformed"),
-            (DecodeError::Invalid(ValidationError::NonFinite { field: "rewards", index: 0 }), "non_finite"),
-            (
-                DecodeError::Invalid(ValidationError::BadDimension { field: "obs_dim", value: 0, max: 1 }),
-                "dims",
-            ),
-        ];
-        for (error, reason) in cases {
-            assert_eq!(decode_reason(&error), reason, "{error}");
-        }
-    }
-}

@@ -18,7 +18,9 @@ use zenoh::query::{Query, Queryable};
 use crate::config::MAX_TOP_K;
 use crate::limiter::Blocked;
 use crate::pending::{Pending, Waiter};
-use crate::server::{Ctx, scan, unix_ms, unix_ms_of};
+use node::unix_ms;
+
+use crate::server::{Ctx, scan, unix_ms_of};
 use crate::service::{SampleOutcome, Waiting};
 use crate::stats::{Rates, ReportInputs};
 

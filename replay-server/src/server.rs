@@ -5,10 +5,10 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, anyhow};
-use node::{Bus, Shutdown};
+use node::{Bus, Shutdown, unix_ms};
 use proto::{ExperienceBatch, PriorityUpdate, topics};
 use tokio::sync::Notify;
 use tokio::task::JoinSet;
@@ -56,11 +56,6 @@ impl Ctx {
     pub fn lock(&self) -> MutexGuard<'_, Service> {
         self.service.lock().unwrap_or_else(PoisonError::into_inner)
     }
-}
-
-/// Wall-clock now, Unix milliseconds.
-pub(crate) fn unix_ms() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64)
 }
 
 /// Unix milliseconds of an earlier `Instant`.
