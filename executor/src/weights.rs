@@ -46,11 +46,7 @@ pub(crate) async fn fetch_loop(mut f: Fetch) -> u64 {
                     continue;
                 }
                 Ok(_) => {}
-                Err(FetchError::Decode(error)) => f
-                    .rejects
-                    .lock()
-                    .unwrap_or_else(std::sync::PoisonError::into_inner)
-                    .decode_failed("weights", &error),
+                Err(FetchError::Decode(error)) => crate::lock(&f.rejects).decode_failed("weights", &error),
                 Err(FetchError::Unavailable(why)) => tracing::debug!(%why, "weights not available yet"),
             }
         }
