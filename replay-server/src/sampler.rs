@@ -184,9 +184,7 @@ pub(crate) async fn state_loop(
             .and_then(|k| k.parse::<u32>().ok())
             .unwrap_or(ctx.cfg.top_k)
             .min(MAX_TOP_K) as usize;
-        let digest = scan(&ctx, k).await;
-        let mut report = {
-            let service = ctx.lock();
+        let (mut report, digest) = scan(&ctx, k, |service, digest| {
             let snapshots = service.replica().map(|r| r.log());
             let inputs = ReportInputs {
                 node: ctx.bus.node(),
@@ -196,8 +194,9 @@ pub(crate) async fn state_loop(
                 snapshots: snapshots.as_ref(),
                 memory_planned_bytes: ctx.cfg.memory_plan().total,
             };
-            crate::stats::build(&service, &inputs)
-        };
+            (crate::stats::build(service, &inputs), digest)
+        })
+        .await;
         // Rates need an interval; the state query is a point in time, so it leaves them out.
         report.metrics.retain(|m| !m.name.ends_with("_per_s"));
         for (rank, entry) in digest.iter().flat_map(|d| d.top.iter()).enumerate() {

@@ -164,13 +164,26 @@ async fn priority_loop(ctx: Arc<Ctx>, sub: SampleSubscriber, mut shutdown: Shutd
     Ok(())
 }
 
-/// Runs a chunked priority scan, releasing the lock between chunks.
-pub(crate) async fn scan(ctx: &Ctx, k: usize) -> Option<PriorityDigest> {
+/// Runs a chunked priority scan, releasing the lock between chunks, then calls `report` with the
+/// digest under the same lock hold as the last chunk: counters read there cannot be newer than
+/// the digest (a priority update landing between the two made a report claim an update whose
+/// priorities it did not show).
+pub(crate) async fn scan<R>(
+    ctx: &Ctx,
+    k: usize,
+    report: impl FnOnce(&Service, Option<PriorityDigest>) -> R,
+) -> R {
     let mut scan = PriorityScan::new(ctx.lock().buffer(), k);
-    while !scan.step(ctx.lock().buffer(), CHUNK) {
+    loop {
+        // A scope, not `drop`: the guard must visibly end before the await for the future to be Send.
+        {
+            let service = ctx.lock();
+            if scan.step(service.buffer(), CHUNK) {
+                return report(&service, scan.finish());
+            }
+        }
         tokio::task::yield_now().await;
     }
-    scan.finish()
 }
 
 async fn stats_loop(ctx: Arc<Ctx>, mut shutdown: Shutdown) -> anyhow::Result<()> {
@@ -186,9 +199,7 @@ async fn stats_loop(ctx: Arc<Ctx>, mut shutdown: Shutdown) -> anyhow::Result<()>
             _ = shutdown.wait() => break,
             _ = ticks.tick() => {}
         }
-        let digest = scan(&ctx, 0).await;
-        let report = {
-            let service = ctx.lock();
+        let report = scan(&ctx, 0, |service, digest| {
             let rates = meter.rates(service.counters(), Instant::now());
             ctx.insert_rate.store(rates.inserts_per_s.to_bits(), Ordering::Relaxed);
             let snapshots = service.replica().map(|r| r.log());
@@ -200,11 +211,12 @@ async fn stats_loop(ctx: Arc<Ctx>, mut shutdown: Shutdown) -> anyhow::Result<()>
                 snapshots: snapshots.as_ref(),
                 memory_planned_bytes: planned,
             };
-            let mut report = crate::stats::build(&service, &inputs);
+            let mut report = crate::stats::build(service, &inputs);
             let pause = ctx.snapshot_pause_max_us.load(Ordering::Relaxed);
             report.push_metric("replay/snapshot_pause_max_us", pause as f64);
             report
-        };
+        })
+        .await;
         if let Err(e) = ctx.bus.put(&key, &report).await {
             tracing::warn!(error = %e, "could not publish stats");
         }
