@@ -23,8 +23,20 @@ pub struct FetchStatus {
     pub unanswered: u64,
     /// Replies that did not decode, by reason.
     pub bad_replies: u64,
-    /// The current reason no batch arrives, and since when (Unix ms); cleared by the next batch.
-    pub waiting: Option<(String, u64)>,
+    /// Why no batch arrives now; cleared by the next batch.
+    pub waiting: Option<Waiting>,
+}
+
+/// Why the learner is waiting for batches, and since when.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Waiting {
+    /// What the replay server said, or that it said nothing.
+    pub why: String,
+    /// Since when (Unix ms).
+    pub since_ms: u64,
+    /// The replay server has too little data (below its minimum, or held to its samples-per-insert
+    /// ratio): more env steps would help. Not so when it is down or slow.
+    pub for_data: bool,
 }
 
 /// Shared state of the request loops.
@@ -39,11 +51,14 @@ impl Fetcher {
         f(&mut self.status.lock().unwrap_or_else(PoisonError::into_inner));
     }
 
-    fn wait_reason(&self, why: String) {
-        self.update(|s| {
-            if s.waiting.as_ref().is_none_or(|(w, _)| *w != why) {
+    /// Records why no batch came. The wait keeps its start while its kind stays the same: a replay
+    /// server filling up says "have 10", then "have 40", and that is one wait for data, not many.
+    fn wait_reason(&self, why: String, for_data: bool) {
+        self.update(|s| match &mut s.waiting {
+            Some(w) if w.for_data == for_data => w.why = why,
+            waiting => {
                 tracing::info!(%why, "learner waiting for batches");
-                s.waiting = Some((why, node::unix_ms()));
+                *waiting = Some(Waiting { why, since_ms: node::unix_ms(), for_data });
             }
         });
     }
@@ -101,7 +116,11 @@ pub async fn request_loop(r: Requests, batches: mpsc::Sender<Sampled>, mut shutd
             Asked::Reply(Ok(SampleReply::Refused(refusal))) => {
                 let name = refusal_name(&refusal.reason);
                 r.fetcher.update(|s| *s.refused.entry(name.into()).or_default() += 1);
-                r.fetcher.wait_reason(format!("replay server refused: {}", refusal.reason));
+                let for_data = matches!(
+                    refusal.reason,
+                    proto::RefusalReason::BelowMinSize { .. } | proto::RefusalReason::RateLimited { .. }
+                );
+                r.fetcher.wait_reason(format!("replay server refused: {}", refusal.reason), for_data);
                 Duration::from_millis(u64::from(refusal.retry_after_ms).clamp(10, 1000))
             }
             Asked::Reply(Err(error)) => {
@@ -110,12 +129,12 @@ pub async fn request_loop(r: Requests, batches: mpsc::Sender<Sampled>, mut shutd
                 Duration::from_millis(100)
             }
             Asked::Error(why) => {
-                r.fetcher.wait_reason(format!("replay server error: {why}"));
+                r.fetcher.wait_reason(format!("replay server error: {why}"), false);
                 Duration::from_millis(200)
             }
             Asked::Silence => {
                 r.fetcher.update(|s| s.unanswered += 1);
-                r.fetcher.wait_reason("replay server not answering (down or restarting)".into());
+                r.fetcher.wait_reason("replay server not answering (down or restarting)".into(), false);
                 Duration::from_millis(200)
             }
         };
@@ -155,5 +174,25 @@ fn refusal_name(reason: &proto::RefusalReason) -> &'static str {
         R::BatchTooLarge { .. } => "batch_too_large",
         R::ShuttingDown => "shutting_down",
         R::Other { .. } => "other",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_wait_keeps_its_start_while_its_kind_stays() {
+        let fetcher = Fetcher::default();
+        let since = |f: &Fetcher| f.status().waiting.map(|w| (w.since_ms, w.for_data));
+        fetcher.wait_reason("below min size 200 (have 10)".into(), true);
+        fetcher.update(|s| s.waiting.as_mut().unwrap().since_ms = 1);
+        fetcher.wait_reason("below min size 200 (have 40)".into(), true);
+        assert_eq!(since(&fetcher), Some((1, true)));
+        assert_eq!(fetcher.status().waiting.unwrap().why, "below min size 200 (have 40)");
+        // The replay server going silent is another wait, and not one for data.
+        fetcher.wait_reason("replay server not answering".into(), false);
+        let (started, for_data) = since(&fetcher).unwrap();
+        assert!(started > 1 && !for_data);
     }
 }

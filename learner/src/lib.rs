@@ -48,7 +48,7 @@ pub use batch::Sampled;
 pub use checkpoint::CheckpointDir;
 pub use config::{LearnerConfig, LearnerSettings};
 pub use evaluate::{Evaluation, evaluate};
-pub use fetch::{FetchStatus, Fetcher, Requests};
+pub use fetch::{FetchStatus, Fetcher, Requests, Waiting};
 use node::{Bus, Shutdown};
 use proto::{EvalReport, topics};
 use tokio::sync::mpsc;
@@ -129,9 +129,14 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
             _ = shutdown.wait() => break,
             _ = starved_check.tick() => {
                 // The update thread says nothing while it has no batches; say it for it, so the param
-                // server can tell a starved learner (replay server empty or gone) from a slow one.
-                let waiting_ms = fetcher.status().waiting.map_or(0, |(_, since)| node::unix_ms().saturating_sub(since));
-                if waiting_ms >= STARVED_AFTER.as_millis() as u64 {
+                // server can tell a learner starved of data (replay server empty) from a slow one.
+                // A replay server that is down is no starvation: more env steps would not reach it.
+                let starved_ms = fetcher
+                    .status()
+                    .waiting
+                    .filter(|w| w.for_data)
+                    .map_or(0, |w| node::unix_ms().saturating_sub(w.since_ms));
+                if starved_ms >= STARVED_AFTER.as_millis() as u64 {
                     let message = proto::LearnerStep {
                         learner_step: step.load(std::sync::atomic::Ordering::Relaxed),
                         weights_version: outbox.weights_version,

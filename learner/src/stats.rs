@@ -33,11 +33,11 @@ pub(crate) fn report(
         r.push_metric("learner/eval_return", e.mean_return);
         r.push_metric("learner/eval_epoch", e.epoch as f64);
     }
-    if let Some((why, since_ms)) = &fetch.waiting {
+    if let Some(waiting) = &fetch.waiting {
         r.blocked.push(BlockedReason {
             what: "learner/sample".into(),
-            why: why.clone(),
-            since_ms: *since_ms,
+            why: waiting.why.clone(),
+            since_ms: waiting.since_ms,
         });
     }
     r.rejected = fetch

@@ -16,12 +16,13 @@
 //!
 //! # Layout
 //!
-//! | file         | what                                                                  |
-//! |--------------|-----------------------------------------------------------------------|
-//! | `barrier.rs` | [`Barrier`]: the global-step barrier, sans-IO                         |
-//! | `store.rs`   | [`ParamStore`]: the latest weights, versions only move forward        |
-//! | `state.rs`   | [`State`]: barrier + store + counters, messages in, announcements out |
-//! | `config.rs`  | [`ParamServerConfig`] (`[param_server]`)                               |
+//! | file            | what                                                                  |
+//! |-----------------|-----------------------------------------------------------------------|
+//! | `barrier.rs`    | [`Barrier`]: the global-step barrier, sans-IO                         |
+//! | `store.rs`      | [`ParamStore`]: the latest weights, versions only move forward        |
+//! | `starvation.rs` | [`StarvationWatch`]: when a starved learner and a full barrier deadlock |
+//! | `state.rs`      | [`State`]: barrier + store + counters, messages in, announcements out |
+//! | `config.rs`     | [`ParamServerConfig`] (`[param_server]`)                              |
 //!
 //! Executors fetch weights only when an announcement names a newer version than theirs, so a
 //! late joiner gets the current weights at once and nobody polls.
@@ -29,6 +30,7 @@
 
 mod barrier;
 mod config;
+mod starvation;
 mod state;
 mod store;
 
@@ -38,6 +40,7 @@ pub use barrier::{Barrier, BarrierRule};
 pub use config::ParamServerConfig;
 use node::{Bus, Shutdown};
 use proto::{Role, Topic, topics};
+pub use starvation::{REFILL_AFTER, StarvationWatch};
 pub use state::{State, StateCounts};
 pub use store::{ParamStore, Rejected, StoreCounts};
 use zenoh::sample::SampleKind;

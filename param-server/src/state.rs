@@ -5,6 +5,7 @@ use std::time::Instant;
 use node::Rejects;
 use proto::{BarrierReport, BlockedReason, GlobalStep, LearnerStep, NodeId, StatsReport, WeightsSnapshot};
 
+use crate::starvation::StarvationWatch;
 use crate::{Barrier, BarrierRule, ParamStore, Rejected};
 
 /// What the param server has done.
@@ -38,14 +39,9 @@ pub struct State {
     rejects: Rejects,
     /// When the learner's step last moved, to say how long it has been still.
     learner_moved_at: Instant,
-    /// The learner says it is starved (since when).
-    starved_since: Option<Instant>,
-    /// The last refill.
-    refilled_at: Option<Instant>,
+    /// Starved learner and blocked barrier: when they make a deadlock.
+    starvation: StarvationWatch,
 }
-
-/// How long a starved learner with every executor blocked waits before a refill, and between refills.
-const REFILL_AFTER: std::time::Duration = std::time::Duration::from_secs(1);
 
 impl State {
     /// Empty state under `rule`.
@@ -56,8 +52,7 @@ impl State {
             counts: StateCounts::default(),
             rejects: Rejects::default(),
             learner_moved_at: Instant::now(),
-            starved_since: None,
-            refilled_at: None,
+            starvation: StarvationWatch::default(),
         }
     }
 
@@ -93,10 +88,7 @@ impl State {
         match proto::decode::<LearnerStep>(bytes) {
             Ok(step) => {
                 self.counts.learner_steps += 1;
-                self.starved_since = match (step.starved, self.starved_since) {
-                    (false, _) => None,
-                    (true, since) => Some(since.unwrap_or_else(Instant::now)),
-                };
+                self.starvation.learner(step.starved, Instant::now());
                 let moved = self.barrier.learner_step(step.learner_step);
                 if moved {
                     self.learner_moved_at = Instant::now();
@@ -118,6 +110,7 @@ impl State {
                 if !self.barrier.report(report) {
                     self.counts.reports_from_unknown += 1;
                 }
+                self.note_barrier();
             }
             Ok(report) => {
                 let detail = format!("report of executor {} on key {key_id:?}", report.executor_id);
@@ -130,6 +123,7 @@ impl State {
     /// An executor's liveliness token appeared (`alive`) or vanished. Returns whether the barrier changed.
     pub fn on_liveliness(&mut self, executor: u32, alive: bool) -> bool {
         let changed = if alive { self.barrier.joined(executor) } else { self.barrier.left(executor) };
+        self.note_barrier();
         if changed && alive {
             self.counts.executors_joined += 1;
             tracing::info!(executor, live = self.barrier.executors(), "executor joined");
@@ -144,17 +138,19 @@ impl State {
         changed
     }
 
+    fn note_barrier(&mut self) {
+        self.starvation.barrier(self.barrier.all_at_barrier(), Instant::now());
+    }
+
     /// A starved learner with every executor waiting at the barrier is a deadlock (the replay
-    /// server came back empty): grant a fresh warm-up share, at most once per second. Returns
-    /// whether the announcement changed.
+    /// server came back empty): grant a fresh warm-up share once both have lasted a while (see
+    /// [`StarvationWatch`]). Returns whether the announcement changed.
     pub fn break_starvation(&mut self) -> bool {
-        let Some(since) = self.starved_since else { return false };
-        let due = self.refilled_at.is_none_or(|at| at.elapsed() >= REFILL_AFTER);
-        if since.elapsed() < REFILL_AFTER || !due || !self.barrier.all_at_barrier() {
+        self.note_barrier();
+        if !self.starvation.refill_due(Instant::now()) {
             return false;
         }
         let share = self.barrier.refill();
-        self.refilled_at = Some(Instant::now());
         self.counts.refills += 1;
         tracing::warn!(share, "learner starved while every executor waits: granting a fresh warm-up share");
         true
@@ -195,7 +191,7 @@ impl State {
         r.push_metric("param/weights_served", c.weights_served as f64);
         r.push_metric("param/executors_left", c.executors_left as f64);
         r.push_metric("param/refills", c.refills as f64);
-        if let Some(since) = self.starved_since {
+        if let Some(since) = self.starvation.starved_since() {
             r.blocked.push(BlockedReason {
                 what: "param/learner_starved".into(),
                 why: format!("the learner has waited for data for {} s", since.elapsed().as_secs()),
