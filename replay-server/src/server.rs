@@ -165,21 +165,24 @@ async fn priority_loop(ctx: Arc<Ctx>, sub: SampleSubscriber, mut shutdown: Shutd
 }
 
 /// Runs a chunked priority scan, releasing the lock between chunks, then calls `report` with the
-/// digest under the same lock hold as the last chunk: counters read there cannot be newer than
-/// the digest (a priority update landing between the two made a report claim an update whose
-/// priorities it did not show).
+/// digest under the same lock hold as the last chunk. When the scan fits one chunk (up to
+/// [`CHUNK`] transitions) the digest and whatever `report` reads from the service describe one
+/// moment; a priority update landing between the two made a report claim an update whose
+/// priorities it did not show. A longer scan describes the buffer over its duration.
 pub(crate) async fn scan<R>(
     ctx: &Ctx,
     k: usize,
     report: impl FnOnce(&Service, Option<PriorityDigest>) -> R,
 ) -> R {
-    let mut scan = PriorityScan::new(ctx.lock().buffer(), k);
+    let mut scan: Option<PriorityScan> = None;
     loop {
         // A scope, not `drop`: the guard must visibly end before the await for the future to be Send.
         {
             let service = ctx.lock();
-            if scan.step(service.buffer(), CHUNK) {
-                return report(&service, scan.finish());
+            let running = scan.get_or_insert_with(|| PriorityScan::new(service.buffer(), k));
+            if running.step(service.buffer(), CHUNK) {
+                let digest = scan.take().and_then(PriorityScan::finish);
+                return report(&service, digest);
             }
         }
         tokio::task::yield_now().await;

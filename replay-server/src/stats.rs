@@ -127,6 +127,8 @@ pub fn build(service: &Service, inputs: &ReportInputs<'_>) -> StatsReport {
         metric("snapshots_failed_total", s.failed as f64);
         metric("snapshots_aborted_total", s.aborted as f64);
         metric("snapshot_last_sequence", s.last_sequence as f64);
+        // Read with the counters: a snapshot numbered above it holds everything they count.
+        metric("snapshot_requested_sequence", service.snapshot_sequence() as f64);
         metric("snapshot_last_serialise_ms", s.last_serialise_ms);
         metric("snapshot_last_bytes", s.last_bytes as f64);
     }

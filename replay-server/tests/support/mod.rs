@@ -172,7 +172,8 @@ pub fn test_config() -> ReplayServerConfig {
     let mut cfg = ReplayServerConfig {
         min_size_to_sample: 256,
         max_batch_size: 256,
-        request_deadline_ms: 2000,
+        // Requests that may be asked before their inserts land wait for them, on a loaded machine too.
+        request_deadline_ms: 10_000,
         stats_interval_ms: 100,
         ..ReplayServerConfig::default()
     };
