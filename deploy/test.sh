@@ -4,4 +4,5 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 ./deploy/setup.sh
-exec cargo test --workspace "$@"
+# --no-fail-fast: one failing test binary must not hide how the others fare.
+exec cargo test --workspace --no-fail-fast "$@"

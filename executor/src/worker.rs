@@ -359,14 +359,21 @@ mod tests {
         }
     }
 
-    /// Receives until a barrier report satisfies `pred`, collecting everything else.
+    /// Receives until a barrier report satisfies `pred`, collecting everything else; fails after
+    /// a minute without one.
     fn until(rx: &mut mpsc::Receiver<Out>, pred: impl Fn(&BarrierReport) -> bool) -> (BarrierReport, u64) {
+        let deadline = Instant::now() + Duration::from_secs(60);
         let mut transitions = 0;
         loop {
-            match rx.blocking_recv().expect("the worker hung up") {
-                Out::Barrier(r) if pred(&r) => return (r, transitions),
-                Out::Experience(b) => transitions += b.len() as u64,
-                _ => {}
+            match rx.try_recv() {
+                Ok(Out::Barrier(r)) if pred(&r) => return (r, transitions),
+                Ok(Out::Experience(b)) => transitions += b.len() as u64,
+                Ok(_) => {}
+                Err(mpsc::error::TryRecvError::Empty) => {
+                    assert!(Instant::now() < deadline, "no matching barrier report within a minute");
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+                Err(mpsc::error::TryRecvError::Disconnected) => panic!("the worker hung up"),
             }
         }
     }

@@ -33,11 +33,21 @@ async fn roles_train_together_and_survive_a_dead_executor() -> anyhow::Result<()
             rs.iter().any(|r| r.executor_id == 2 && r.weights_version >= joined_at)
         })
         .await?;
+    // ... then newer ones, and it publishes: what its report is checked for below.
+    barrier
+        .wait_until("executor 2 to load newer weights and take steps", |rs| {
+            let mine = || rs.iter().filter(|r| r.executor_id == 2 && r.weights_version > 0);
+            let first = mine().map(|r| r.weights_version).min();
+            mine().any(|r| Some(r.weights_version) > first && r.env_steps >= 32)
+        })
+        .await?;
     let last_step = cluster.wait_for_learner_step(after_kill.learner_step + 300).await?;
     evals.wait_until("an evaluation (one per 100-update epoch)", |e| !e.is_empty()).await?;
 
     let stopped = within("the whole cluster to stop", Duration::from_secs(60), cluster.stop()).await??;
     let learner = &stopped.learner;
+    // A refill would raise the shares above the bounds checked here; none is due in this run.
+    assert_eq!(stopped.param.counts.refills, 0, "{:?}", stopped.param.counts);
     assert!(learner.updater.final_step >= last_step, "{:?}", learner.updater);
     assert!(learner.updater.weights_published >= 2);
     let first_eval = evals.snapshot()[0];

@@ -3,6 +3,7 @@
 //! at the barrier (a deadlock), which the param server breaks with a fresh warm-up share.
 
 use cluster::{Cluster, Spec};
+use proto::{BarrierReport, topics};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_restarted_learner_resumes_and_an_empty_replay_is_refilled() -> anyhow::Result<()> {
@@ -18,6 +19,19 @@ async fn a_restarted_learner_resumes_and_an_empty_replay_is_refilled() -> anyhow
     assert!(old.updater.checkpoints >= 1, "the stopping learner writes a checkpoint: {:?}", old.updater);
     let resumed = cluster.wait_for_learner_step(old.updater.final_step + 100).await?;
 
+    // The deadlock needs executors at the barrier when the replay server empties; were they behind
+    // the learner instead, their next transitions would refill it without any help.
+    let barrier = cluster.collect::<BarrierReport>(&topics::control_barrier_all(cluster.run())).await?;
+    barrier
+        .wait_until("both executors at the barrier", |rs| {
+            (0..2).all(|id| {
+                rs.iter()
+                    .rev()
+                    .find(|r| r.executor_id == id)
+                    .is_some_and(|r| r.blocked && r.env_steps >= r.allowed_env_steps)
+            })
+        })
+        .await?;
     let before = cluster.restart_replay().await?;
     assert!(before.size_transitions >= 200);
     // Empty now: the learner can only move on once executors, unblocked by a refill, store 200 again.
