@@ -21,6 +21,8 @@ pub struct MonitorState {
     barriers: HashMap<u32, BarrierReport>,
     /// Env steps at each executor's latest episode end: a count even when its stats are lost.
     episode_env_steps: HashMap<u32, u64>,
+    /// Env steps of each id's earlier processes: a restarted executor counts from 0 again.
+    retired_env_steps: HashMap<u32, u64>,
     recent_returns: VecDeque<f64>,
     last_step: Option<GlobalStep>,
     last_eval: Option<EvalReport>,
@@ -37,6 +39,7 @@ impl MonitorState {
             alive: HashMap::new(),
             barriers: HashMap::new(),
             episode_env_steps: HashMap::new(),
+            retired_env_steps: HashMap::new(),
             recent_returns: VecDeque::with_capacity(RECENT_EPISODES),
             last_step: None,
             last_eval: None,
@@ -103,7 +106,10 @@ impl MonitorState {
         self.received.add(Family::Liveliness);
         match Topic::parse(&self.run, key) {
             Ok(Topic::Liveliness(node)) => {
-                self.alive.insert(node, alive);
+                let was = self.alive.insert(node, alive);
+                if node.role == Role::Executor && alive && was == Some(false) {
+                    self.retire_executor(node.id);
+                }
             }
             _ => self.undecodable.add(Family::Liveliness),
         }
@@ -140,6 +146,16 @@ impl MonitorState {
         }
     }
 
+    /// An executor id came back after its token vanished: a new process, counting from 0. The old
+    /// one's steps move to the retired total and its per-process figures are forgotten.
+    fn retire_executor(&mut self, id: u32) {
+        let steps = self.executor_env_steps(id).unwrap_or(0);
+        *self.retired_env_steps.entry(id).or_default() += steps;
+        self.reports.remove(&NodeId { role: Role::Executor, id });
+        self.barriers.remove(&id);
+        self.episode_env_steps.remove(&id);
+    }
+
     /// Every executor id seen on any topic, ascending.
     fn executor_ids(&self) -> BTreeSet<u32> {
         let executor = |node: &&NodeId| node.role == Role::Executor;
@@ -147,6 +163,7 @@ impl MonitorState {
         ids.extend(self.alive.keys().filter(executor).map(|n| n.id));
         ids.extend(self.barriers.keys());
         ids.extend(self.episode_env_steps.keys());
+        ids.extend(self.retired_env_steps.keys());
         ids
     }
 
@@ -158,7 +175,7 @@ impl MonitorState {
         ExecutorRow {
             id,
             alive: self.alive.get(&node).copied(),
-            env_steps: self.executor_env_steps(id),
+            env_steps: self.executor_env_steps_total(id),
             env_steps_per_s: metric("executor/env_steps_per_s"),
             weights_lag_steps: metric("executor/weights_lag_steps"),
             policy_lag_steps: metric("executor/policy_lag_steps"),
@@ -167,8 +184,9 @@ impl MonitorState {
         }
     }
 
-    /// An executor's cumulative env steps: the largest of what its stats, barrier and episode reports
-    /// say, since all three count the same steps and whichever arrived last is the newest.
+    /// The env steps of an executor's current process: the largest of what its stats, barrier and
+    /// episode reports say, since all three count the same steps and whichever arrived last is the
+    /// newest.
     fn executor_env_steps(&self, id: u32) -> Option<u64> {
         let node = NodeId { role: Role::Executor, id };
         let from_stats =
@@ -178,9 +196,18 @@ impl MonitorState {
         [from_stats, from_barrier, from_episodes].into_iter().flatten().max()
     }
 
+    /// An executor id's env steps over all its processes.
+    fn executor_env_steps_total(&self, id: u32) -> Option<u64> {
+        let retired = self.retired_env_steps.get(&id).copied();
+        match (retired, self.executor_env_steps(id)) {
+            (None, None) => None,
+            (retired, current) => Some(retired.unwrap_or(0) + current.unwrap_or(0)),
+        }
+    }
+
     fn env_steps_total(&self) -> Option<u64> {
         let known: Vec<u64> =
-            self.executor_ids().into_iter().filter_map(|id| self.executor_env_steps(id)).collect();
+            self.executor_ids().into_iter().filter_map(|id| self.executor_env_steps_total(id)).collect();
         (!known.is_empty()).then(|| known.iter().sum())
     }
 

@@ -99,6 +99,23 @@ fn env_steps_are_the_newest_of_stats_barrier_and_episodes() {
 }
 
 #[test]
+fn a_restarted_executor_adds_to_its_ids_steps() {
+    let mut s = busy();
+    assert_eq!(s.tick(at(1.0)).env_steps_total, Some(6500));
+    // Executor 2 (dead at 1000 steps) comes back as a new process counting from 0.
+    s.on_liveliness(&fixtures::liveliness(Role::Executor, 2), true);
+    assert_eq!(s.tick(at(2.0)).env_steps_total, Some(6500));
+    s.on_stats(&fixtures::executor(2, 300.0, 90.0, false));
+    let t = s.tick(at(3.0));
+    assert_eq!(t.env_steps_total, Some(6800));
+    assert_eq!(t.executors[2].env_steps, Some(1300));
+    assert_eq!(t.executors[2].alive, Some(true));
+    // A token seen again while up (a re-announcement) is not a new process.
+    s.on_liveliness(&fixtures::liveliness(Role::Executor, 2), true);
+    assert_eq!(s.tick(at(4.0)).env_steps_total, Some(6800));
+}
+
+#[test]
 fn recent_return_is_the_mean_of_the_last_twenty_episodes() {
     let mut s = MonitorState::new(fixtures::run());
     assert_eq!(s.recent_return(), None);
