@@ -127,10 +127,6 @@ fn lock_hold_comparison(capacity: usize) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn free_port() -> std::io::Result<u16> {
-    Ok(std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
-}
-
 /// 16 encoded batches of 64 consecutive random transitions with TD errors.
 fn payloads() -> Vec<ZBytes> {
     let mut rng = StdRng::seed_from_u64(0);
@@ -191,7 +187,7 @@ fn cpu_seconds() -> f64 {
 
 async fn run_phase(phase: &Phase) -> anyhow::Result<()> {
     let run = RunId::new(format!("bench-{}", std::process::id()))?;
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port()?);
+    let endpoint = format!("tcp/127.0.0.1:{}", node::free_loopback_port()?);
     let dir = std::env::temp_dir().join(format!("replay-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let mut cfg =

@@ -1,29 +1,15 @@
 //! The replay server over loopback zenoh: a publisher and a sampler against it, blocking with
-//! deadlines and reasons, restart from snapshots (graceful and killed), and a flood of malformed
-//! messages.
+//! deadlines and reasons, and restart from snapshots (graceful and killed). The flood of malformed
+//! messages is in `flood.rs`, a binary of its own: it fills zenoh's shared receive threads.
 
 mod support;
 
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use proto::{
-    GlobalStep, NodeId, PriorityUpdate, RefusalReason, Role, SampleReply, SampleRequest, StatsReport, topics,
-};
-use rand::{Rng, SeedableRng, rngs::StdRng};
+use proto::{NodeId, PriorityUpdate, RefusalReason, Role, SampleReply, StatsReport, topics};
 use replay_server::ReplayServerConfig;
-use support::{Client, Server, ant_batch, assert_exact_rows, metric, test_config, within};
-
-fn request(id: u64, batch_size: u32) -> SampleRequest {
-    SampleRequest { request_id: id, learner_step: id, batch_size }
-}
-
-fn batch_of(reply: SampleReply) -> proto::SampledBatch {
-    match reply {
-        SampleReply::Batch(batch) => batch,
-        SampleReply::Refused(refusal) => panic!("refused: {} ({:?})", refusal.reason, refusal),
-    }
-}
+use support::{Client, Server, ant_batch, assert_exact_rows, batch_of, metric, request, test_config, within};
 
 fn temp_dir(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("replay-server-it-{name}-{}", std::process::id()));
@@ -278,7 +264,7 @@ struct Process {
 
 impl Process {
     fn spawn(config: &std::path::Path, log: &std::path::Path) -> Process {
-        let endpoint = format!("tcp/127.0.0.1:{}", support::free_port());
+        let endpoint = format!("tcp/127.0.0.1:{}", node::free_loopback_port().expect("a free loopback port"));
         let child = std::process::Command::new(env!("CARGO_BIN_EXE_replay-server"))
             .args(["--run-id", "it-killed", "--listen", &endpoint, "--config"])
             .arg(config)
@@ -361,95 +347,6 @@ async fn killed_process_restarts_from_its_periodic_snapshot() {
     assert_exact_rows(&batch, 0..500);
     drop(second);
     std::fs::remove_dir_all(&dir).expect("clean up");
-}
-
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_flood_of_malformed_messages_leaves_it_serving_correct_batches() {
-    let (server, client) = Server::start("it-flood", test_config()).await;
-    let mut rng = StdRng::seed_from_u64(3);
-    let good = proto::encode(&ant_batch(0, 0, 64));
-    let mut expected: BTreeMap<&str, u64> = BTreeMap::new();
-    let mut send_good = 0u32;
-    for i in 0..3000u32 {
-        let (bytes, reason) = match i % 8 {
-            0 => {
-                // Random bytes that cannot start with the magic.
-                let len = rng.random_range(13..300);
-                let mut bytes: Vec<u8> = (0..len).map(|_| rng.random()).collect();
-                bytes[0] = b'X';
-                (bytes, "experience/bad_magic")
-            }
-            1 => (good[..rng.random_range(0..good.len())].to_vec(), "experience/truncated"),
-            2 => {
-                let step = GlobalStep {
-                    learner_step: 1,
-                    weights_version: 1,
-                    env_steps_per_learner_step: 1,
-                    warm_up_share: 0,
-                    min_weights_version: 0,
-                    live_executors: 1,
-                };
-                (proto::encode(&step), "experience/wrong_kind")
-            }
-            3 => {
-                let mut nan = ant_batch(0, 0, 4);
-                nan.transitions.observations[rng.random_range(0..4 * 105)] = f32::NAN;
-                (proto::encode(&nan), "experience/non_finite")
-            }
-            4 => {
-                let mut bytes = good.clone();
-                bytes[2] = 7;
-                (bytes, "experience/bad_version")
-            }
-            5 => {
-                let mut bytes = good.clone();
-                let at = rng.random_range(13..bytes.len());
-                bytes[at] ^= 1 << rng.random_range(0..8);
-                (bytes, "experience/checksum")
-            }
-            6 => {
-                let mut wrong = ant_batch(0, 0, 2);
-                wrong.transitions.obs_dim = 10;
-                wrong.transitions.observations.truncate(20);
-                wrong.transitions.next_observations.truncate(20);
-                (proto::encode(&wrong), "experience/dims")
-            }
-            _ => {
-                let first = send_good * 32;
-                send_good += 1;
-                client.put_batch(&ant_batch(1, first, 32)).await;
-                continue;
-            }
-        };
-        *expected.entry(reason).or_default() += 1;
-        client.put_raw(0, bytes).await;
-    }
-    // Malformed priority updates and sample requests too.
-    client.bus.session().put(topics::replay_priorities(&server.run), vec![1u8, 2, 3]).await.expect("put");
-    *expected.entry("priorities/truncated").or_default() += 1;
-    let bad_request = client.sample_raw(vec![b'S', b'L', 0, 0], Duration::from_secs(5)).await;
-    assert!(bad_request.unwrap_err().contains("bad sample request"));
-    *expected.entry("sample/truncated").or_default() += 1;
-
-    let total: u64 = expected.values().sum();
-    let inserted = send_good * 32;
-    let state = client
-        .wait_state("every message handled", |s| {
-            metric(s, "replay/rejected_total") == total as f64
-                && metric(s, "replay/inserted_transitions_total") == inserted as f64
-        })
-        .await;
-    let rejected: BTreeMap<String, u64> =
-        state.rejected.iter().map(|r| (r.reason.clone(), r.count)).collect();
-    let expected: BTreeMap<String, u64> = expected.into_iter().map(|(k, v)| (k.to_string(), v)).collect();
-    assert_eq!(rejected, expected);
-    for id in 0..20 {
-        let batch = batch_of(client.sample(request(id, 128)).await);
-        assert_exact_rows(&batch, 0..inserted);
-    }
-    let report = server.stop().await;
-    assert_eq!(report.rejected, expected);
-    assert_eq!(report.counters.sampled_batches, 20);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

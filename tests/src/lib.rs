@@ -30,12 +30,6 @@ pub async fn within<T>(what: &str, limit: Duration, f: impl Future<Output = T>) 
     tokio::time::timeout(limit, f).await.map_err(|_| anyhow!("timed out after {limit:?} waiting for {what}"))
 }
 
-/// A free loopback port (bound, read, released: the replay server binds it right after).
-pub fn free_port() -> Result<u16> {
-    let listener = std::net::TcpListener::bind("127.0.0.1:0")?;
-    Ok(listener.local_addr()?.port())
-}
-
 /// What to start.
 #[derive(Debug, Clone)]
 pub struct Spec {
@@ -136,7 +130,7 @@ impl Cluster {
     /// each has declared its liveliness token.
     pub async fn start(spec: Spec) -> Result<Cluster> {
         let run = RunId::new(spec.run_id.clone())?;
-        let endpoint = format!("tcp/127.0.0.1:{}", free_port()?);
+        let endpoint = format!("tcp/127.0.0.1:{}", node::free_loopback_port()?);
         let server = BusConfig { listen: vec![endpoint.clone()], ..BusConfig::default() };
         let peer = BusConfig::loopback(vec![endpoint.clone()]);
         let replay_bus = open(&run, Role::Replay, 0, &server).await?;

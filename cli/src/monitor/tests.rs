@@ -10,14 +10,9 @@ use super::fixtures;
 use super::{MonitorArgs, watch};
 use crate::json::{self, Value};
 
-fn free_port() -> u16 {
-    let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("bind 127.0.0.1:0");
-    listener.local_addr().expect("local addr").port()
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn records_what_a_run_publishes_and_plot_draws_it() {
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let endpoint = format!("tcp/127.0.0.1:{}", node::free_loopback_port().expect("a free port"));
     let run = fixtures::run();
     let config = BusConfig { listen: vec![endpoint.clone()], ..BusConfig::default() };
     let session = zenoh::open(config.to_zenoh().unwrap()).await.unwrap();

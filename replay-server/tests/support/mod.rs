@@ -27,12 +27,6 @@ pub async fn within<T>(what: &str, f: impl Future<Output = T>) -> T {
     }
 }
 
-/// A free loopback port (bound, read, released: the server binds it right after).
-pub fn free_port() -> u16 {
-    let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("bind 127.0.0.1:0");
-    listener.local_addr().expect("local addr").port()
-}
-
 /// A running server.
 pub struct Server {
     pub endpoint: String,
@@ -44,7 +38,7 @@ pub struct Server {
 impl Server {
     /// Starts `run` for `cfg` on a fresh port; returns once a client sees its liveliness token.
     pub async fn start(run: &str, cfg: ReplayServerConfig) -> (Server, Client) {
-        let port = free_port();
+        let port = node::free_loopback_port().expect("a free loopback port");
         Self::start_on(run, cfg, port).await
     }
 
@@ -228,4 +222,17 @@ pub fn assert_exact_rows(batch: &proto::SampledBatch, inserted: std::ops::Range<
 /// The value of a metric in a report.
 pub fn metric(report: &StatsReport, name: &str) -> f64 {
     report.metric(name).unwrap_or_else(|| panic!("metric {name} missing"))
+}
+
+/// A sample request numbered `id`.
+pub fn request(id: u64, batch_size: u32) -> SampleRequest {
+    SampleRequest { request_id: id, learner_step: id, batch_size }
+}
+
+/// The batch of a reply; panics on a refusal, with its reason.
+pub fn batch_of(reply: SampleReply) -> proto::SampledBatch {
+    match reply {
+        SampleReply::Batch(batch) => batch,
+        SampleReply::Refused(refusal) => panic!("refused: {} ({:?})", refusal.reason, refusal),
+    }
 }
