@@ -102,11 +102,17 @@ impl Barrier {
         self.executors.iter().map(|(id, report)| (*id, report.as_ref()))
     }
 
-    /// Whether every live executor's latest report says it waits at the barrier, i.e. has used its
-    /// allowance (and at least one is known). Waiting for weights does not count: a refill would
-    /// not help it.
+    /// Whether every live executor's latest report says it waits at the barrier as announced now,
+    /// i.e. has used an allowance at least the current one (and at least one executor is known).
+    /// Waiting for weights does not count, nor does a report sent before the latest step or refill
+    /// reached its sender (or before the first announcement did): a refill would not help those.
     pub fn all_at_barrier(&self) -> bool {
-        let at_barrier = |r: &BarrierReport| r.blocked && r.env_steps >= r.allowed_env_steps;
+        let now = self.announcement();
+        let at_barrier = |r: &BarrierReport| {
+            r.blocked
+                && r.env_steps >= r.allowed_env_steps
+                && r.allowed_env_steps >= now.allowance(r.joined_at)
+        };
         !self.executors.is_empty() && self.executors.values().all(|r| r.as_ref().is_some_and(at_barrier))
     }
 
@@ -243,8 +249,22 @@ mod tests {
         b.report(BarrierReport { blocked: true, ..report(1, 50) });
         assert!(b.all_at_barrier());
         b.learner_step(7);
+        assert!(!b.all_at_barrier(), "reports from before step 7 are not at today's barrier");
         assert_eq!(b.refill(), 50);
         assert_eq!(b.announcement().allowance(0), 50 + 50 + 7);
+        for id in 0..2 {
+            b.report(BarrierReport { blocked: true, ..report(id, 57) });
+        }
+        assert!(!b.all_at_barrier(), "sent before the refill reached them");
+        for id in 0..2 {
+            b.report(BarrierReport { blocked: true, ..report(id, 107) });
+        }
+        assert!(b.all_at_barrier());
+        // Before any announcement an executor waits with nothing allowed: not at the barrier.
+        let mut fresh = Barrier::new(rule(1, 100, None));
+        fresh.joined(0);
+        fresh.report(BarrierReport { blocked: true, ..report(0, 0) });
+        assert!(!fresh.all_at_barrier());
     }
 
     #[test]

@@ -13,10 +13,15 @@ use std::time::{Duration, Instant};
 /// refill, and the least time between refills.
 pub const REFILL_AFTER: Duration = Duration::from_secs(1);
 
+/// A starved learner repeats its notice (every 250 ms); one not heard from for this long is no
+/// longer taken as starved: it died, or it lost its replay server, where a refill would not help.
+pub const NOTICE_STALE_AFTER: Duration = Duration::from_millis(1500);
+
 /// Tracks the two conditions and the last refill.
 #[derive(Debug, Default, Clone)]
 pub struct StarvationWatch {
     starved_since: Option<Instant>,
+    last_notice: Option<Instant>,
     blocked_since: Option<Instant>,
     refilled_at: Option<Instant>,
 }
@@ -24,7 +29,8 @@ pub struct StarvationWatch {
 impl StarvationWatch {
     /// The learner said whether it is starved.
     pub fn learner(&mut self, starved: bool, now: Instant) {
-        self.starved_since = since(starved, self.starved_since, now);
+        self.starved_since = since(starved, self.fresh_starved_since(now), now);
+        self.last_notice = starved.then_some(now);
     }
 
     /// Whether every live executor is at its allowance now.
@@ -35,7 +41,9 @@ impl StarvationWatch {
     /// Whether to refill now; a true answer is recorded as a refill. The executors' block then
     /// starts over, since the refill lets them move.
     pub fn refill_due(&mut self, now: Instant) -> bool {
-        let (Some(starved), Some(blocked)) = (self.starved_since, self.blocked_since) else { return false };
+        let (Some(starved), Some(blocked)) = (self.fresh_starved_since(now), self.blocked_since) else {
+            return false;
+        };
         let together = now.saturating_duration_since(starved.max(blocked));
         let spaced = self.refilled_at.is_none_or(|at| now.saturating_duration_since(at) >= REFILL_AFTER);
         if together < REFILL_AFTER || !spaced {
@@ -46,9 +54,15 @@ impl StarvationWatch {
         true
     }
 
-    /// Since when the learner has said it is starved.
-    pub fn starved_since(&self) -> Option<Instant> {
-        self.starved_since
+    /// Since when the learner has said it is starved, if it still says so.
+    pub fn starved_since(&self, now: Instant) -> Option<Instant> {
+        self.fresh_starved_since(now)
+    }
+
+    fn fresh_starved_since(&self, now: Instant) -> Option<Instant> {
+        let fresh =
+            self.last_notice.is_some_and(|at| now.saturating_duration_since(at) <= NOTICE_STALE_AFTER);
+        self.starved_since.filter(|_| fresh)
     }
 }
 
@@ -70,9 +84,12 @@ mod tests {
         // The start of a run: starved from the beginning, executors blocked only at 5 s.
         let t0 = Instant::now();
         let mut w = StarvationWatch::default();
-        w.learner(true, t0);
+        for ms in (0..=5000).step_by(250) {
+            w.learner(true, at(t0, ms));
+        }
         w.barrier(false, at(t0, 4000));
         assert!(!w.refill_due(at(t0, 4900)));
+        assert_eq!(w.starved_since(at(t0, 5000)), Some(t0));
         w.barrier(true, at(t0, 5000));
         assert!(!w.refill_due(at(t0, 5100)), "blocked for 0.1 s only");
         // Their last batches arrive, the learner gets data: no refill.
@@ -97,6 +114,23 @@ mod tests {
     }
 
     #[test]
+    fn a_learner_that_stops_saying_it_is_starved_is_not() {
+        // Its replay server went down (or it died): the notices stop, and so do refills.
+        let t0 = Instant::now();
+        let mut w = StarvationWatch::default();
+        w.barrier(true, t0);
+        w.learner(true, t0);
+        assert!(!w.refill_due(at(t0, 1600)), "last notice 1.6 s ago");
+        assert_eq!(w.starved_since(at(t0, 1600)), None);
+        // Notices again: a new starvation, timed from now.
+        w.learner(true, at(t0, 2000));
+        assert_eq!(w.starved_since(at(t0, 2000)), Some(at(t0, 2000)));
+        assert!(!w.refill_due(at(t0, 2500)));
+        w.learner(true, at(t0, 2750));
+        assert!(w.refill_due(at(t0, 3000)));
+    }
+
+    #[test]
     fn an_executor_moving_restarts_the_block() {
         let t0 = Instant::now();
         let mut w = StarvationWatch::default();
@@ -105,6 +139,7 @@ mod tests {
         w.barrier(false, at(t0, 900));
         w.barrier(true, at(t0, 950));
         assert!(!w.refill_due(at(t0, 1500)));
+        w.learner(true, at(t0, 1500));
         assert!(w.refill_due(at(t0, 1950)));
     }
 }

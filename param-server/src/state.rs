@@ -191,11 +191,11 @@ impl State {
         r.push_metric("param/weights_served", c.weights_served as f64);
         r.push_metric("param/executors_left", c.executors_left as f64);
         r.push_metric("param/refills", c.refills as f64);
-        if let Some(since) = self.starvation.starved_since() {
+        if let Some(since) = self.starvation.starved_since(Instant::now()) {
             r.blocked.push(BlockedReason {
                 what: "param/learner_starved".into(),
                 why: format!("the learner has waited for data for {} s", since.elapsed().as_secs()),
-                since_ms: unix_ms,
+                since_ms: unix_ms.saturating_sub(since.elapsed().as_millis() as u64),
             });
         }
         let still_s = self.learner_moved_at.elapsed().as_secs();

@@ -60,9 +60,11 @@ pub struct LearnerStep {
     pub learner_step: u64,
     /// Version of the newest weights the learner has published.
     pub weights_version: u64,
-    /// The learner is waiting for data: the replay server refuses (below its minimum) or is silent.
-    /// With every executor at the barrier this is a deadlock (a replay server restarted empty); the
-    /// param server breaks it by granting a fresh warm-up share.
+    /// The learner has waited a second or more for data: the replay server refuses for lack of it
+    /// (below its minimum, or held to its samples-per-insert ratio); a silent replay server is not
+    /// starvation. Repeated every 250 ms while it lasts, then once `false`. With every executor at
+    /// the barrier this is a deadlock (a replay server restarted empty); the param server breaks it
+    /// by granting a fresh warm-up share.
     pub starved: bool,
 }
 
