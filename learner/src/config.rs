@@ -72,6 +72,17 @@ pub struct LearnerConfig {
     pub agent: AgentConfig,
     /// `[train]`: task and seed.
     pub train: RunKeys,
+    /// `[replay_server]`, the one key the learner must agree with.
+    pub replay_server: ReplayDeadline,
+}
+
+/// The replay server's request deadline, read from the shared run file to check the learner's
+/// sample timeout against it.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(default)]
+pub struct ReplayDeadline {
+    /// `request_deadline_ms` (absent: the replay server's default).
+    pub request_deadline_ms: Option<u64>,
 }
 
 impl LearnerConfig {
@@ -104,6 +115,15 @@ impl node::RoleConfig for LearnerConfig {
         ];
         if let Some(key) = node::config::first_zero(&positive) {
             return Err(format!("[learner] {key} must be > 0"));
+        }
+        let deadline = self.replay_server.request_deadline_ms.unwrap_or(proto::DEFAULT_REQUEST_DEADLINE_MS);
+        if s.sample_timeout_ms <= deadline {
+            // A request the replay server holds to its deadline would look like silence, so a
+            // learner starved of data could not say so and a deadlock would never be broken.
+            return Err(format!(
+                "[learner] sample_timeout_ms ({}) must exceed [replay_server] request_deadline_ms ({deadline})",
+                s.sample_timeout_ms
+            ));
         }
         if s.prefetch_batches > 64 {
             return Err("[learner] prefetch_batches must be at most 64".into());
@@ -147,5 +167,25 @@ mod tests {
             ..c
         };
         assert!(zero.validate().unwrap_err().contains("epoch_length_updates"));
+    }
+
+    #[test]
+    fn the_sample_timeout_must_outlast_the_replay_servers_deadline() {
+        let text = |timeout: u64| {
+            format!(
+                "[train]\ntask = \"ant-v5\"\n[learner]\nsample_timeout_ms = {timeout}\n\
+                 [replay_server]\nrequest_deadline_ms = 3000\nmin_size_to_sample = 10\n\
+                 [replay_server.buffer]\ncapacity_transitions = 100\n"
+            )
+        };
+        assert_eq!(LearnerConfig::parse(&text(3001)).unwrap().validate(), Ok(()));
+        let err = LearnerConfig::parse(&text(3000)).unwrap().validate().unwrap_err();
+        assert!(err.contains("must exceed [replay_server] request_deadline_ms (3000)"), "{err}");
+        // Without the key, the replay server's default deadline is the one to outlast.
+        let short = LearnerConfig {
+            learner: LearnerSettings { sample_timeout_ms: 900, ..LearnerSettings::default() },
+            ..LearnerConfig::parse("[train]\ntask = \"ant-v5\"\n").unwrap()
+        };
+        assert!(short.validate().unwrap_err().contains("(1000)"));
     }
 }

@@ -27,6 +27,17 @@ pub struct FetchStatus {
     pub waiting: Option<Waiting>,
 }
 
+impl FetchStatus {
+    /// Whether the learner has been starved of data for at least `after` at `now_ms` (Unix ms): the
+    /// replay server refuses for lack of data. Not when it is down or slow: more env steps would
+    /// not help then.
+    pub fn starved(&self, now_ms: u64, after: Duration) -> bool {
+        self.waiting
+            .as_ref()
+            .is_some_and(|w| w.for_data && now_ms.saturating_sub(w.since_ms) >= after.as_millis() as u64)
+    }
+}
+
 /// Why the learner is waiting for batches, and since when.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Waiting {
@@ -194,5 +205,16 @@ mod tests {
         fetcher.wait_reason("replay server not answering".into(), false);
         let (started, for_data) = since(&fetcher).unwrap();
         assert!(started > 1 && !for_data);
+        assert!(!fetcher.status().starved(started + 5000, Duration::from_secs(1)), "down is not starved");
+    }
+
+    #[test]
+    fn starved_after_a_lasting_wait_for_data() {
+        let fetcher = Fetcher::default();
+        fetcher.wait_reason("below min size 200 (have 0)".into(), true);
+        let since = fetcher.status().waiting.unwrap().since_ms;
+        let after = Duration::from_secs(1);
+        assert!(!fetcher.status().starved(since + 999, after));
+        assert!(fetcher.status().starved(since + 1000, after));
     }
 }

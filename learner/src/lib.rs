@@ -11,7 +11,7 @@
 //! | `replay/sample`       | query     | `SampleRequest` → `SampleReply`                 |
 //! | `replay/priorities`   | out       | `PriorityUpdate` after every update            |
 //! | `params/publish`      | out       | `WeightsSnapshot` every `publish_weights_every_updates` |
-//! | `control/learner`     | out       | `LearnerStep` every `announce_every_updates`   |
+//! | `control/learner`     | out       | `LearnerStep` every `announce_every_updates`; every 250 ms while starved of data |
 //! | `eval`                | out       | `EvalReport` per epoch                          |
 //! | `stats/learner/<id>`  | out       | `StatsReport`: updates/s, losses, waiting        |
 //! | `liveliness/learner/<id>` | token | declared at start                               |
@@ -54,7 +54,8 @@ use proto::{EvalReport, topics};
 use tokio::sync::mpsc;
 pub use updater::{LossMeans, Out, Progress, Updater, UpdaterReport};
 
-/// Waiting this long for a batch makes the learner tell the param server it is starved.
+/// Waiting this long for data (the replay server refusing for lack of it) makes the learner tell the
+/// param server it is starved.
 const STARVED_AFTER: Duration = Duration::from_secs(1);
 
 /// What the role did, returned when it stops.
@@ -123,24 +124,23 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     drop(batch_tx);
 
     let (mut outbox, matching) = outbox::Outbox::new(bus.clone()).await?;
-    let mut starved_check = tokio::time::interval(STARVED_AFTER / 2);
+    // Often enough for the param server's notice expiry, and to say "no longer" soon after a batch.
+    let mut starved_check = tokio::time::interval(STARVED_AFTER / 4);
+    let mut said_starved = false;
     loop {
         tokio::select! {
             _ = shutdown.wait() => break,
             _ = starved_check.tick() => {
                 // The update thread says nothing while it has no batches; say it for it, so the param
-                // server can tell a learner starved of data (replay server empty) from a slow one.
-                // A replay server that is down is no starvation: more env steps would not reach it.
-                let starved_ms = fetcher
-                    .status()
-                    .waiting
-                    .filter(|w| w.for_data)
-                    .map_or(0, |w| node::unix_ms().saturating_sub(w.since_ms));
-                if starved_ms >= STARVED_AFTER.as_millis() as u64 {
+                // server can tell a learner starved of data from a slow one: repeated while it lasts,
+                // and once more when it ends (the next step message may be a while away).
+                let starved = fetcher.status().starved(node::unix_ms(), STARVED_AFTER);
+                if starved || said_starved {
+                    said_starved = starved;
                     let message = proto::LearnerStep {
                         learner_step: step.load(std::sync::atomic::Ordering::Relaxed),
                         weights_version: outbox.weights_version,
-                        starved: true,
+                        starved,
                     };
                     if let Err(error) = bus.put(&topics::control_learner(bus.run()), &message).await {
                         tracing::debug!(%error, "starvation notice not sent");

@@ -70,6 +70,9 @@ pub use control::{BarrierReport, EvalReport, GlobalStep, LearnerStep};
 pub use error::{DecodeError, Result, TopicError, ValidationError};
 pub use experience::{ExperienceBatch, Transition, Transitions};
 pub use params::WeightsSnapshot;
-pub use sampling::{PriorityUpdate, RefusalReason, SampleRefusal, SampleReply, SampleRequest, SampledBatch};
+pub use sampling::{
+    DEFAULT_REQUEST_DEADLINE_MS, PriorityUpdate, RefusalReason, SampleRefusal, SampleReply, SampleRequest,
+    SampledBatch,
+};
 pub use stats::{BlockedReason, EpisodeReport, Metric, RejectCount, StatsReport};
 pub use topics::{NodeId, Role, RunId, Topic};

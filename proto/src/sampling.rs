@@ -14,6 +14,11 @@ use crate::codec::{Message, MessageKind, sealed::Sealed};
 use crate::error::ValidationError;
 use crate::experience::Transitions;
 
+/// How long the replay server holds a sample request waiting for data before refusing it, unless
+/// configured otherwise (`[replay_server] request_deadline_ms`). A sampler's own timeout must be
+/// longer, or a held request looks like silence. Here because both sides of the exchange read it.
+pub const DEFAULT_REQUEST_DEADLINE_MS: u64 = 1000;
+
 /// Query payload on `replay/sample`: the learner asks for one batch.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SampleRequest {

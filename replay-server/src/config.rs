@@ -86,7 +86,7 @@ impl Default for ReplayServerConfig {
             samples_per_insert_tolerance: 4096.0,
             max_batch_size: 1024,
             max_insert_transitions: 4096,
-            request_deadline_ms: 1000,
+            request_deadline_ms: proto::DEFAULT_REQUEST_DEADLINE_MS,
             max_pending_requests: 64,
             seed: 0,
             snapshot_path: None,
