@@ -12,6 +12,7 @@ pub mod fixtures;
 mod journal;
 pub mod record;
 pub mod state;
+mod steps;
 #[cfg(test)]
 mod tests;
 pub mod tick;

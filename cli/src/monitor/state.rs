@@ -7,6 +7,7 @@ use proto::{BarrierReport, EpisodeReport, EvalReport, GlobalStep, NodeId, Role, 
 
 use super::family::{Family, FamilyCounts};
 use super::record::{EpisodeRecord, EvalRecord};
+use super::steps::{StepCount, StepSource};
 use super::tick::{BlockedEntry, ExecutorRow, Losses, Now, Tick};
 
 /// Episodes averaged for the "recent return" figure (the plot's moving-average window too).
@@ -19,10 +20,8 @@ pub struct MonitorState {
     reports: HashMap<NodeId, StatsReport>,
     alive: HashMap<NodeId, bool>,
     barriers: HashMap<u32, BarrierReport>,
-    /// Env steps at each executor's latest episode end: a count even when its stats are lost.
-    episode_env_steps: HashMap<u32, u64>,
-    /// Env steps of each id's earlier processes: a restarted executor counts from 0 again.
-    retired_env_steps: HashMap<u32, u64>,
+    /// Env steps per executor id, over its processes, from every report that carries them.
+    env_steps: HashMap<u32, StepCount>,
     recent_returns: VecDeque<f64>,
     last_step: Option<GlobalStep>,
     last_eval: Option<EvalReport>,
@@ -38,8 +37,7 @@ impl MonitorState {
             reports: HashMap::new(),
             alive: HashMap::new(),
             barriers: HashMap::new(),
-            episode_env_steps: HashMap::new(),
-            retired_env_steps: HashMap::new(),
+            env_steps: HashMap::new(),
             recent_returns: VecDeque::with_capacity(RECENT_EPISODES),
             last_step: None,
             last_eval: None,
@@ -64,6 +62,11 @@ impl MonitorState {
     /// A [`StatsReport`] from `stats/<role>/<id>`: replaces that process's previous one.
     pub fn on_stats(&mut self, payload: &[u8]) {
         if let Some(report) = self.decode::<StatsReport>(Family::Stats, payload) {
+            if report.role == Role::Executor
+                && let Some(steps) = report.metric("executor/env_steps")
+            {
+                self.observe_steps(report.id, StepSource::Stats, steps as u64);
+            }
             self.reports.insert(report.node(), report);
         }
     }
@@ -71,8 +74,7 @@ impl MonitorState {
     /// An [`EpisodeReport`]: returns its record line.
     pub fn on_episode(&mut self, now: Now, payload: &[u8]) -> Option<EpisodeRecord> {
         let episode = self.decode::<EpisodeReport>(Family::Episodes, payload)?;
-        let steps = self.episode_env_steps.entry(episode.executor_id).or_default();
-        *steps = (*steps).max(episode.env_steps);
+        self.observe_steps(episode.executor_id, StepSource::Episode, episode.env_steps);
         if self.recent_returns.len() == RECENT_EPISODES {
             self.recent_returns.pop_front();
         }
@@ -97,6 +99,7 @@ impl MonitorState {
     /// A [`BarrierReport`] from `control/barrier/<id>`.
     pub fn on_barrier(&mut self, payload: &[u8]) {
         if let Some(report) = self.decode::<BarrierReport>(Family::Barrier, payload) {
+            self.observe_steps(report.executor_id, StepSource::Barrier, report.env_steps);
             self.barriers.insert(report.executor_id, report);
         }
     }
@@ -106,10 +109,7 @@ impl MonitorState {
         self.received.add(Family::Liveliness);
         match Topic::parse(&self.run, key) {
             Ok(Topic::Liveliness(node)) => {
-                let was = self.alive.insert(node, alive);
-                if node.role == Role::Executor && alive && was == Some(false) {
-                    self.retire_executor(node.id);
-                }
+                self.alive.insert(node, alive);
             }
             _ => self.undecodable.add(Family::Liveliness),
         }
@@ -146,14 +146,8 @@ impl MonitorState {
         }
     }
 
-    /// An executor id came back after its token vanished: a new process, counting from 0. The old
-    /// one's steps move to the retired total and its per-process figures are forgotten.
-    fn retire_executor(&mut self, id: u32) {
-        let steps = self.executor_env_steps(id).unwrap_or(0);
-        *self.retired_env_steps.entry(id).or_default() += steps;
-        self.reports.remove(&NodeId { role: Role::Executor, id });
-        self.barriers.remove(&id);
-        self.episode_env_steps.remove(&id);
+    fn observe_steps(&mut self, executor: u32, source: StepSource, steps: u64) {
+        self.env_steps.entry(executor).or_default().observe(source, steps);
     }
 
     /// Every executor id seen on any topic, ascending.
@@ -162,8 +156,7 @@ impl MonitorState {
         let mut ids: BTreeSet<u32> = self.reports.keys().filter(executor).map(|n| n.id).collect();
         ids.extend(self.alive.keys().filter(executor).map(|n| n.id));
         ids.extend(self.barriers.keys());
-        ids.extend(self.episode_env_steps.keys());
-        ids.extend(self.retired_env_steps.keys());
+        ids.extend(self.env_steps.keys());
         ids
     }
 
@@ -175,7 +168,7 @@ impl MonitorState {
         ExecutorRow {
             id,
             alive: self.alive.get(&node).copied(),
-            env_steps: self.executor_env_steps_total(id),
+            env_steps: self.env_steps.get(&id).map(StepCount::total),
             env_steps_per_s: metric("executor/env_steps_per_s"),
             weights_lag_steps: metric("executor/weights_lag_steps"),
             policy_lag_steps: metric("executor/policy_lag_steps"),
@@ -184,30 +177,12 @@ impl MonitorState {
         }
     }
 
-    /// The env steps of an executor's current process: the largest of what its stats, barrier and
-    /// episode reports say, since all three count the same steps and whichever arrived last is the
-    /// newest.
-    fn executor_env_steps(&self, id: u32) -> Option<u64> {
-        let node = NodeId { role: Role::Executor, id };
-        let from_stats =
-            self.reports.get(&node).and_then(|r| r.metric("executor/env_steps")).map(|s| s as u64);
-        let from_barrier = self.barriers.get(&id).map(|b| b.env_steps);
-        let from_episodes = self.episode_env_steps.get(&id).copied();
-        [from_stats, from_barrier, from_episodes].into_iter().flatten().max()
-    }
-
-    /// An executor id's env steps over all its processes.
-    fn executor_env_steps_total(&self, id: u32) -> Option<u64> {
-        let retired = self.retired_env_steps.get(&id).copied();
-        match (retired, self.executor_env_steps(id)) {
-            (None, None) => None,
-            (retired, current) => Some(retired.unwrap_or(0) + current.unwrap_or(0)),
-        }
-    }
-
     fn env_steps_total(&self) -> Option<u64> {
-        let known: Vec<u64> =
-            self.executor_ids().into_iter().filter_map(|id| self.executor_env_steps_total(id)).collect();
+        let known: Vec<u64> = self
+            .executor_ids()
+            .into_iter()
+            .filter_map(|id| self.env_steps.get(&id).map(StepCount::total))
+            .collect();
         (!known.is_empty()).then(|| known.iter().sum())
     }
 

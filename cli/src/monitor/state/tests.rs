@@ -110,9 +110,11 @@ fn a_restarted_executor_adds_to_its_ids_steps() {
     assert_eq!(t.env_steps_total, Some(6800));
     assert_eq!(t.executors[2].env_steps, Some(1300));
     assert_eq!(t.executors[2].alive, Some(true));
-    // A token seen again while up (a re-announcement) is not a new process.
-    s.on_liveliness(&fixtures::liveliness(Role::Executor, 2), true);
-    assert_eq!(s.tick(at(4.0)).env_steps_total, Some(6800));
+    // A token that blips while the process goes on (a lost link) is not a new process.
+    s.on_liveliness(&fixtures::liveliness(Role::Executor, 0), false);
+    s.on_liveliness(&fixtures::liveliness(Role::Executor, 0), true);
+    s.on_stats(&fixtures::executor(0, 3100.0, 100.0, false));
+    assert_eq!(s.tick(at(4.0)).env_steps_total, Some(6900));
 }
 
 #[test]
