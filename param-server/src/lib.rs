@@ -20,7 +20,7 @@
 //! |-----------------|-----------------------------------------------------------------------|
 //! | `barrier.rs`    | [`Barrier`]: the global-step barrier, sans-IO                         |
 //! | `store.rs`      | [`ParamStore`]: the latest weights, versions only move forward        |
-//! | `starvation.rs` | [`StarvationWatch`]: when a starved learner and a full barrier deadlock |
+//! | `starvation.rs` | [`StarvationWatch`]: when a starved learner and full barrier deadlock |
 //! | `state.rs`      | [`State`]: barrier + store + counters, messages in, announcements out |
 //! | `config.rs`     | [`ParamServerConfig`] (`[param_server]`)                              |
 //!
