@@ -32,8 +32,8 @@ pub(crate) fn report(node: NodeId, progress: &Progress, rejects: &Rejects) -> St
     if let Some(step) = p.step {
         r.push_metric("executor/learner_step_seen", step.learner_step as f64);
     }
-    if let Some((wait, since_ms)) = &p.waiting {
-        r.blocked.push(BlockedReason { what: wait.what().into(), why: wait.why(), since_ms: *since_ms });
+    if let Some(w) = &p.waiting {
+        r.blocked.push(BlockedReason { what: w.wait.what().into(), why: w.wait.why(), since_ms: w.since_ms });
     }
     r.rejected = rejects.to_report();
     r

@@ -73,6 +73,17 @@ impl Wait {
     }
 }
 
+/// What the rollout waits on, and since when.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Waiting {
+    /// The reason.
+    pub wait: Wait,
+    /// Since when (for durations).
+    pub since: Instant,
+    /// Since when, Unix ms (for reports).
+    pub since_ms: u64,
+}
+
 /// A progress snapshot for the stats report.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Progress {
@@ -98,8 +109,8 @@ pub struct Progress {
     pub dropped_non_finite: u64,
     /// Total time spent waiting, ms.
     pub blocked_ms_total: u64,
-    /// What it waits on now, and since when (Unix ms).
-    pub waiting: Option<(Wait, u64)>,
+    /// What it waits on now, and since when.
+    pub waiting: Option<Waiting>,
 }
 
 /// What the thread sends the shell.
@@ -145,7 +156,7 @@ struct Worker {
     joined_at: Option<u64>,
     step: Option<GlobalStep>,
     allowed: u64,
-    waiting: Option<(Wait, Instant, u64)>,
+    waiting: Option<Waiting>,
     last_return: Option<f64>,
     heard_at: Option<Instant>,
 }
@@ -204,8 +215,8 @@ impl Worker {
             let wait = self.check();
             match wait {
                 None => {
-                    if let Some((_, since, _)) = self.waiting.take() {
-                        self.report.blocked_ms_total += since.elapsed().as_millis() as u64;
+                    if let Some(waiting) = self.waiting.take() {
+                        self.report.blocked_ms_total += waiting.since.elapsed().as_millis() as u64;
                         self.send_report();
                     }
                     self.step_once()?;
@@ -214,11 +225,11 @@ impl Worker {
                     // Publish what is pending first: the learner may be waiting for exactly these.
                     self.flush()?;
                     // A change of reason keeps the time the wait began.
-                    let (since, since_unix) = self
+                    let (since, since_ms) = self
                         .waiting
-                        .map_or_else(|| (Instant::now(), node::unix_ms()), |(_, at, unix)| (at, unix));
-                    let newly = self.waiting.is_none_or(|(w, _, _)| w != wait);
-                    self.waiting = Some((wait, since, since_unix));
+                        .map_or_else(|| (Instant::now(), node::unix_ms()), |w| (w.since, w.since_ms));
+                    let newly = self.waiting.is_none_or(|w| w.wait != wait);
+                    self.waiting = Some(Waiting { wait, since, since_ms });
                     if newly {
                         self.send_report();
                     }
@@ -250,8 +261,8 @@ impl Worker {
         }
         self.flush()?;
         self.report.env_steps = self.rollout.env_steps();
-        if let Some((_, since, _)) = self.waiting.take() {
-            self.report.blocked_ms_total += since.elapsed().as_millis() as u64;
+        if let Some(waiting) = self.waiting.take() {
+            self.report.blocked_ms_total += waiting.since.elapsed().as_millis() as u64;
         }
         Ok(())
     }
@@ -319,8 +330,7 @@ impl Worker {
     }
 
     fn blocked_ms_total_now(&self) -> u64 {
-        self.report.blocked_ms_total
-            + self.waiting.map_or(0, |(_, since, _)| since.elapsed().as_millis() as u64)
+        self.report.blocked_ms_total + self.waiting.map_or(0, |w| w.since.elapsed().as_millis() as u64)
     }
 
     fn progress(&self, env_steps_per_s: f64) -> Progress {
@@ -336,7 +346,7 @@ impl Worker {
             batches: self.report.batches,
             dropped_non_finite: self.report.dropped_non_finite,
             blocked_ms_total: self.blocked_ms_total_now(),
-            waiting: self.waiting.map(|(w, _, unix)| (w, unix)),
+            waiting: self.waiting,
         }
     }
 }
