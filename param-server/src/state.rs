@@ -13,6 +13,9 @@ use crate::{Barrier, BarrierRule, ParamStore, Rejected};
 pub struct StateCounts {
     /// Weight snapshots taken (newer than the one held).
     pub snapshots_accepted: u64,
+    /// Snapshots of the version already held, sent again (the learner's re-send to a param server
+    /// that starts listening): ignored, not rejected.
+    pub snapshots_repeated: u64,
     /// Weight queries answered (with weights or an error).
     pub weights_served: u64,
     /// Learner progress messages received.
@@ -74,6 +77,10 @@ impl State {
                     self.learner_moved_at = Instant::now();
                 }
                 true
+            }
+            Err(Rejected::Repeated { .. }) => {
+                self.counts.snapshots_repeated += 1;
+                false
             }
             Err(Rejected::NotNewer { version, held }) => {
                 let detail = format!("version {version} is not newer than {held}");
@@ -188,6 +195,7 @@ impl State {
         r.push_metric("param/live_executors", f64::from(step.live_executors));
         r.push_metric("param/weights_bytes", self.store.latest().map_or(0, |s| s.safetensors.len()) as f64);
         r.push_metric("param/snapshots_accepted", c.snapshots_accepted as f64);
+        r.push_metric("param/snapshots_repeated", c.snapshots_repeated as f64);
         r.push_metric("param/weights_served", c.weights_served as f64);
         r.push_metric("param/executors_left", c.executors_left as f64);
         r.push_metric("param/refills", c.refills as f64);
@@ -259,6 +267,7 @@ mod tests {
         assert!(s.on_weights(&weights(0)));
         assert!(!s.on_weights(&weights(0)), "a repeat is not newer");
         assert!(s.on_weights(&weights(50)));
+        assert!(!s.on_weights(&weights(20)), "older");
         assert_eq!(s.announcement().weights_version, 50);
         assert_eq!(s.announcement().learner_step, 50, "the snapshot's learner step counts too");
         assert!(s.on_learner_step(&proto::encode(&LearnerStep {
@@ -272,7 +281,8 @@ mod tests {
             starved: false
         })));
         assert_eq!(s.announcement().learner_step, 60);
-        assert_eq!(s.rejects().counts()["weights/not_newer"], 1);
+        assert_eq!(s.rejects().counts()["weights/not_newer"], 1, "the repeat is not bad input");
+        assert_eq!(s.counts().snapshots_repeated, 1);
     }
 
     #[test]

@@ -5,7 +5,14 @@ use proto::WeightsSnapshot;
 /// Why a snapshot was not taken.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Rejected {
-    /// Its version is not newer than the one held (a late or repeated publish).
+    /// The version held, sent again: the learner re-sends its newest weights whenever a param
+    /// server starts listening, so this is expected, not bad input.
+    Repeated {
+        /// The version.
+        version: u64,
+    },
+    /// Its version is older than the one held (a late publish, or a learner resumed from an
+    /// older checkpoint).
     NotNewer {
         /// The snapshot's version.
         version: u64,
@@ -32,12 +39,15 @@ pub struct ParamStore {
 }
 
 impl ParamStore {
-    /// Takes `snapshot` if it is newer than the one held.
+    /// Takes `snapshot` if it is newer than the one held; refusals are counted either way.
     pub fn offer(&mut self, snapshot: WeightsSnapshot) -> Result<u64, Rejected> {
         if let Some(held) = &self.latest
             && snapshot.version <= held.version
         {
             self.rejected += 1;
+            if snapshot.version == held.version {
+                return Err(Rejected::Repeated { version: held.version });
+            }
             return Err(Rejected::NotNewer { version: snapshot.version, held: held.version });
         }
         self.accepted += 1;
@@ -71,7 +81,7 @@ mod tests {
         assert!(store.latest().is_none());
         assert_eq!(store.offer(snapshot(10)), Ok(10));
         assert_eq!(store.offer(snapshot(5)), Err(Rejected::NotNewer { version: 5, held: 10 }));
-        assert_eq!(store.offer(snapshot(10)), Err(Rejected::NotNewer { version: 10, held: 10 }));
+        assert_eq!(store.offer(snapshot(10)), Err(Rejected::Repeated { version: 10 }));
         assert_eq!(store.offer(snapshot(20)), Ok(20));
         assert_eq!(store.latest().map(|s| s.version), Some(20));
         assert_eq!(store.counts(), StoreCounts { accepted: 2, rejected: 2 });
