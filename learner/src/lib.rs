@@ -183,7 +183,9 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
         evaluations: std::mem::take(&mut outbox.evaluations),
         fetch: fetcher.status(),
     };
-    drop((outbox, matching));
+    // The listener first: undeclared after its publisher, zenoh logs an error for it.
+    drop(matching);
+    drop(outbox);
     bus.close().await?;
     Ok(report)
 }
