@@ -18,11 +18,10 @@ use zenoh::query::{Query, Queryable};
 use crate::config::MAX_TOP_K;
 use crate::limiter::Blocked;
 use crate::pending::{Pending, Waiter};
-use node::unix_ms;
 
 use crate::server::{Ctx, scan, unix_ms_of};
 use crate::service::{SampleOutcome, Waiting};
-use crate::stats::{Rates, ReportInputs};
+use crate::stats::Rates;
 
 type QueryQueue = Queryable<FifoChannelHandler<Query>>;
 
@@ -184,19 +183,9 @@ pub(crate) async fn state_loop(
             .and_then(|k| k.parse::<u32>().ok())
             .unwrap_or(ctx.cfg.top_k)
             .min(MAX_TOP_K) as usize;
-        let (mut report, digest) = scan(&ctx, k, |service, digest| {
-            let snapshots = service.replica().map(|r| r.log());
-            let inputs = ReportInputs {
-                node: ctx.bus.node(),
-                unix_ms: unix_ms(),
-                rates: Rates::default(),
-                digest: digest.as_ref(),
-                snapshots: snapshots.as_ref(),
-                memory_planned_bytes: ctx.cfg.memory_plan().total,
-            };
-            (crate::stats::build(service, &inputs), digest)
-        })
-        .await;
+        let (mut report, digest) =
+            scan(&ctx, k, |service, digest| (ctx.report(service, Rates::default(), digest.as_ref()), digest))
+                .await;
         // Rates need an interval; the state query is a point in time, so it leaves them out.
         report.metrics.retain(|m| !m.name.ends_with("_per_s"));
         for (rank, entry) in digest.iter().flat_map(|d| d.top.iter()).enumerate() {

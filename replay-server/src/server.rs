@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, anyhow};
 use node::{Bus, Shutdown, unix_ms};
-use proto::{ExperienceBatch, PriorityUpdate, topics};
+use proto::{ExperienceBatch, PriorityUpdate, StatsReport, topics};
 use tokio::sync::Notify;
 use tokio::task::JoinSet;
 use zenoh::handlers::{FifoChannel, FifoChannelHandler};
@@ -20,7 +20,7 @@ use crate::config::ReplayServerConfig;
 use crate::sampler;
 use crate::scan::{CHUNK, PriorityDigest, PriorityScan};
 use crate::service::{Service, Waiting};
-use crate::stats::{RateMeter, ReportInputs};
+use crate::stats::{RateMeter, Rates, ReportInputs};
 
 /// What every task of the server shares.
 #[derive(Debug)]
@@ -30,6 +30,8 @@ pub(crate) struct Ctx {
     pub inserted: Notify,
     pub bus: Bus,
     pub cfg: ReplayServerConfig,
+    /// `cfg`'s memory plan total, reported with every stats report.
+    memory_planned_bytes: u64,
     /// Transitions inserted per second over the last stats interval (f64 bits), for retry hints.
     pub insert_rate: AtomicU64,
     /// Longest time a snapshot request held the service, µs.
@@ -44,6 +46,7 @@ impl Ctx {
             service: Mutex::new(service),
             inserted: Notify::new(),
             bus,
+            memory_planned_bytes: cfg.memory_plan().total,
             cfg,
             insert_rate: AtomicU64::new(0),
             snapshot_pause_max_us: AtomicU64::new(0),
@@ -53,6 +56,21 @@ impl Ctx {
 
     /// The service. A panic in a handler poisons the mutex; the state is still consistent (every
     /// buffer operation is all-or-nothing), so later handlers carry on.
+    /// The stats report of `service` (locked by the caller, with `digest` scanned under the same
+    /// hold) at `rates`: what the stats topic and the state query both publish.
+    pub fn report(&self, service: &Service, rates: Rates, digest: Option<&PriorityDigest>) -> StatsReport {
+        let snapshots = service.replica().map(|r| r.log());
+        let inputs = ReportInputs {
+            node: self.bus.node(),
+            unix_ms: unix_ms(),
+            rates,
+            digest,
+            snapshots: snapshots.as_ref(),
+            memory_planned_bytes: self.memory_planned_bytes,
+        };
+        crate::stats::build(service, &inputs)
+    }
+
     pub fn lock(&self) -> MutexGuard<'_, Service> {
         self.service.lock().unwrap_or_else(PoisonError::into_inner)
     }
@@ -195,7 +213,6 @@ async fn stats_loop(ctx: Arc<Ctx>, mut shutdown: Shutdown) -> anyhow::Result<()>
     let mut ticks = tokio::time::interval_at(tokio::time::Instant::now() + period, period);
     ticks.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut meter = RateMeter::new(ctx.lock().counters(), Instant::now());
-    let planned = ctx.cfg.memory_plan().total;
     loop {
         tokio::select! {
             biased;
@@ -205,16 +222,7 @@ async fn stats_loop(ctx: Arc<Ctx>, mut shutdown: Shutdown) -> anyhow::Result<()>
         let report = scan(&ctx, 0, |service, digest| {
             let rates = meter.rates(service.counters(), Instant::now());
             ctx.insert_rate.store(rates.inserts_per_s.to_bits(), Ordering::Relaxed);
-            let snapshots = service.replica().map(|r| r.log());
-            let inputs = ReportInputs {
-                node: ctx.bus.node(),
-                unix_ms: unix_ms(),
-                rates,
-                digest: digest.as_ref(),
-                snapshots: snapshots.as_ref(),
-                memory_planned_bytes: planned,
-            };
-            let mut report = crate::stats::build(service, &inputs);
+            let mut report = ctx.report(service, rates, digest.as_ref());
             let pause = ctx.snapshot_pause_max_us.load(Ordering::Relaxed);
             report.push_metric("replay/snapshot_pause_max_us", pause as f64);
             report
