@@ -120,9 +120,14 @@ impl Barrier {
     /// server lost its contents while executors wait for the learner (otherwise a deadlock).
     /// Returns the env steps granted per executor.
     pub fn refill(&mut self) -> u64 {
-        let share = self.rule.warm_up_transitions.div_ceil(self.executors.len().max(1) as u64);
+        let share = self.share();
         self.refilled += share;
         share
+    }
+
+    /// One live executor's part of the warm-up (the whole of it while none is known).
+    fn share(&self) -> u64 {
+        self.rule.warm_up_transitions.div_ceil(self.executors.len().max(1) as u64)
     }
 
     /// The learner's step as the barrier sees it.
@@ -141,12 +146,11 @@ impl Barrier {
 
     /// The announcement for `control/step`.
     pub fn announcement(&self) -> GlobalStep {
-        let live = self.executors.len().max(1) as u64;
         GlobalStep {
             learner_step: self.learner_step,
             weights_version: self.versions.last().copied().unwrap_or(0),
             env_steps_per_learner_step: self.rule.env_steps_per_learner_step,
-            warm_up_share: self.rule.warm_up_transitions.div_ceil(live) + self.refilled,
+            warm_up_share: self.share() + self.refilled,
             min_weights_version: self.min_weights_version(),
             live_executors: u32::try_from(self.executors.len()).unwrap_or(u32::MAX),
         }
