@@ -50,7 +50,7 @@ pub use config::{LearnerConfig, LearnerSettings};
 pub use evaluate::{Evaluation, evaluate};
 pub use fetch::{FetchStatus, Fetcher, Requests, Waiting};
 use node::{Bus, Shutdown};
-use proto::{EvalReport, topics};
+use proto::EvalReport;
 use tokio::sync::mpsc;
 pub use updater::{LossMeans, Out, Progress, Updater, UpdaterReport};
 
@@ -142,9 +142,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
                         weights_version: outbox.weights_version,
                         starved,
                     };
-                    if let Err(error) = bus.put(&topics::control_learner(bus.run()), &message).await {
-                        tracing::debug!(%error, "starvation notice not sent");
-                    }
+                    outbox.send(Out::Step(message), &fetcher).await;
                 }
             }
             Ok(status) = matching.recv_async() => if status.matching() {
