@@ -1,7 +1,14 @@
-//! Learner updates per second at batch 128, candle vs fused, and batch-1 action latency, Ant-sized
-//! networks (paper defaults; obs 105 = Ant-v5, obs 125 = rllab Ant; act 8). Plain `Instant` timing.
+//! Learner updates per second, candle vs fused, for the configurations the deploy run files train,
+//! and batch-1 action latency. Plain `Instant` timing; the two learners' windows are interleaved so
+//! that their ratio is measured under the same machine load.
 //!
 //! `RAYON_NUM_THREADS=1 cargo bench -p agent --bench update`; `-- --test` runs a quick smoke pass.
+//! For each configuration it prints one line
+//! `<config> fused: <N> updates/s, candle: <M> updates/s, ratio <R>` (medians), then the default's
+//! fused rate against the paper's. The configurations are the [agent] tables of
+//! `deploy/configs/ant-v5-paper.toml` (the dissertation's), `deploy/configs/ant-v5.toml` (the
+//! default run: reparameterised, twin Q, learned temperature, uniform prior) and
+//! `deploy/configs/ant-rllab.toml` (obs 125), with Ant's dimensions.
 //! The fused learner runs with its default vectorised tanh and, for comparison, with libm's
 //! (`with_exact_tanh`, bit-identical to candle). `RAYON_NUM_THREADS=2` runs both learners' GEMMs
 //! on two threads. No fused batch-1 forward exists: the action latency is the candle `Actor`'s,
@@ -16,6 +23,8 @@
 //!   by the inverse pass).
 
 use std::time::Instant;
+
+use serde::Deserialize;
 
 use agent::{AgentConfig, Batch, FusedLearner, Learner, Mode};
 use rand::{Rng, SeedableRng, rngs::StdRng};
@@ -129,61 +138,113 @@ fn flops(cfg: &AgentConfig, rows: usize) -> (f64, f64) {
     (nominal as f64, executed as f64)
 }
 
-fn print_rate(label: &str, r: Rates, flop: f64) {
+/// Windows measured one at a time, as one [`Rates`].
+fn merge(windows: &[Rates]) -> Rates {
+    let mut wall: Vec<f64> = windows.iter().map(|r| r.wall.1).collect();
+    let mut on_cpu: Vec<f64> = windows.iter().filter_map(|r| r.on_cpu).collect();
+    wall.sort_by(f64::total_cmp);
+    on_cpu.sort_by(f64::total_cmp);
+    let n = wall.len();
+    Rates { wall: (wall[0], wall[n / 2], wall[n - 1]), on_cpu: on_cpu.get(on_cpu.len() / 2).copied() }
+}
+
+/// One learner's rates; GFLOP/s where the FLOP count is known (the paper-shaped update).
+fn print_rate(label: &str, r: Rates, flop: Option<f64>) {
     let (lo, med, hi) = r.wall;
-    let gflops = med * flop / 1e9;
     let on_cpu = r.on_cpu.map_or(String::new(), |c| format!("; {c:7.1}/s per on-CPU second"));
-    println!(
-        "{label:<36} {lo:7.1} / {med:7.1} / {hi:7.1} updates/s  {gflops:5.1} GFLOP/s = {:4.1}% of peak{on_cpu}",
-        100.0 * gflops / PEAK_GFLOPS
-    );
+    let gflops = flop.map_or(String::new(), |f| {
+        let g = med * f / 1e9;
+        format!("  {g:5.1} GFLOP/s = {:4.1}% of peak", 100.0 * g / PEAK_GFLOPS)
+    });
+    println!("{label:<36} {lo:7.1} / {med:7.1} / {hi:7.1} updates/s{gflops}{on_cpu}");
+}
+
+/// The `[agent]` table of a deploy run file, on Ant's dimensions.
+fn run_file_agent(file: &str, obs_dim: usize) -> AgentConfig {
+    #[derive(Deserialize)]
+    struct RunFile {
+        #[serde(default)]
+        agent: toml::Table,
+    }
+    let path = format!("{}/../deploy/configs/{file}", env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    let run: RunFile = toml::from_str(&text).unwrap_or_else(|e| panic!("{path}: {e}"));
+    let cfg: AgentConfig = run.agent.try_into().unwrap_or_else(|e| panic!("{path} [agent]: {e}"));
+    AgentConfig { obs_dim, act_dim: 8, ..cfg }
 }
 
 fn main() -> agent::Result<()> {
     let quick = std::env::args().any(|a| a == "--test");
-    let (warmup, runs, per_window, acts) = if quick { (2, 1, 2, 10) } else { (100, 5, 200, 20_000) };
+    let (warmup, runs, per_window, acts) = if quick { (2, 1, 2, 10) } else { (100, 7, 200, 20_000) };
     // Both learners use RAYON_NUM_THREADS threads for their matrix products (candle reads it
     // itself, every core when unset; the fused learner is told, 1 when unset).
     let threads: usize = std::env::var("RAYON_NUM_THREADS").ok().and_then(|t| t.parse().ok()).unwrap_or(1);
+    println!("agent update bench, {threads} thread(s); peak taken as {PEAK_GFLOPS} GFLOP/s per core");
     println!(
-        "agent update bench, {threads} thread(s), batch 128; peak taken as {PEAK_GFLOPS} GFLOP/s per core"
+        "updates/s: min / median / max of {runs} windows of {per_window} updates, candle and fused interleaved"
     );
-    println!(
-        "updates/s: min / median / max of {runs} windows of {per_window} updates; GFLOP/s of the median"
-    );
-    for obs_dim in [105, 125] {
-        let cfg = AgentConfig::for_task(obs_dim, 8);
-        let (nominal, executed) = flops(&cfg, 128);
-        println!(
-            "\nobs {obs_dim} act 8: {:.1} MFLOP nominal per update, {:.1} MFLOP executed by the fused update",
-            nominal / 1e6,
-            executed / 1e6
-        );
+    let configs = [
+        ("paper ant-v5", run_file_agent("ant-v5-paper.toml", 105)),
+        ("default ant-v5", run_file_agent("ant-v5.toml", 105)),
+        ("paper ant-rllab", run_file_agent("ant-rllab.toml", 125)),
+    ];
+    let mut summary = Vec::new();
+    let mut fused_median = Vec::new();
+    for (name, cfg) in &configs {
+        let paper_shaped = !(cfg.reparameterize || cfg.twin_q || cfg.learn_temperature);
+        let (nominal, executed) = flops(cfg, cfg.batch_size);
+        if paper_shaped {
+            println!(
+                "\n{name} (obs {}, batch {}): {:.1} MFLOP nominal per update, {:.1} MFLOP executed by the fused update",
+                cfg.obs_dim,
+                cfg.batch_size,
+                nominal / 1e6,
+                executed / 1e6
+            );
+        } else {
+            println!(
+                "\n{name} (obs {}, batch {}): reparameterize {}, twin_q {}, learn_temperature {}",
+                cfg.obs_dim, cfg.batch_size, cfg.reparameterize, cfg.twin_q, cfg.learn_temperature
+            );
+        }
         let mut rng = StdRng::seed_from_u64(1);
-        let b = batch(&cfg, 128, &mut rng);
-
+        let b = batch(cfg, cfg.batch_size, &mut rng);
         let mut candle = Learner::new(cfg.clone(), 1)?;
+        let mut fused = FusedLearner::new(cfg.clone(), 1)?.with_threads(threads);
+        let mut exact = FusedLearner::new(cfg.clone(), 1)?.with_threads(threads).with_exact_tanh(true);
         for _ in 0..warmup {
             candle.update(&b)?;
+            fused.update(&b)?;
+            exact.update(&b)?;
         }
-        let r = rate(runs, per_window, threads == 1, || {
-            candle.update(&b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
-        });
-        print_rate("candle (nominal FLOPs)", r, nominal);
-
-        for (label, exact) in [("fused", false), ("fused, exact tanh", true)] {
-            let mut fused = FusedLearner::new(cfg.clone(), 1)?.with_threads(threads).with_exact_tanh(exact);
-            for _ in 0..warmup {
-                fused.update(&b)?;
-            }
-            let r = rate(runs, per_window, threads == 1, || {
+        // One window of each per round, so a change in the machine's load hits all three alike.
+        let (mut rc, mut rf, mut re) = (Vec::new(), Vec::new(), Vec::new());
+        for _ in 0..runs {
+            rc.push(rate(1, per_window, threads == 1, || {
+                candle.update(&b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
+            }));
+            rf.push(rate(1, per_window, threads == 1, || {
                 fused.update(&b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
-            });
-            print_rate(&format!("{label} (executed FLOPs)"), r, executed);
+            }));
+            re.push(rate(1, per_window, threads == 1, || {
+                exact.update(&b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
+            }));
         }
+        let (rc, rf, re) = (merge(&rc), merge(&rf), merge(&re));
+        let flop = |f| if paper_shaped { Some(f) } else { None };
+        print_rate("candle (nominal FLOPs)", rc, flop(nominal));
+        print_rate("fused (executed FLOPs)", rf, flop(executed));
+        print_rate("fused, exact tanh", re, flop(executed));
+        summary.push(format!(
+            "{name} fused: {:.0} updates/s, candle: {:.0} updates/s, ratio {:.2}",
+            rf.wall.1,
+            rc.wall.1,
+            rf.wall.1 / rc.wall.1
+        ));
+        fused_median.push(rf.wall.1);
 
         let mut actor = candle.actor(2)?;
-        let obs: Vec<f32> = b.observations[..obs_dim].to_vec();
+        let obs: Vec<f32> = b.observations[..cfg.obs_dim].to_vec();
         for (label, mode) in [("act explore", Mode::Explore), ("act deterministic", Mode::Deterministic)] {
             let (lo, med, hi) = rate(runs, acts, false, || {
                 std::hint::black_box(actor.act(&obs, mode).unwrap_or_else(|e| panic!("act failed: {e}")));
@@ -196,7 +257,7 @@ fn main() -> agent::Result<()> {
                 1e6 / lo
             );
         }
-        let one = batch(&cfg, 1, &mut rng);
+        let one = batch(cfg, 1, &mut rng);
         let (lo, med, hi) = rate(runs, acts, false, || {
             std::hint::black_box(actor.td_errors(&one).unwrap_or_else(|e| panic!("td failed: {e}")));
         })
@@ -208,5 +269,10 @@ fn main() -> agent::Result<()> {
             1e6 / lo
         );
     }
+    println!();
+    for line in &summary {
+        println!("{line}");
+    }
+    println!("default ant-v5 fused / paper ant-v5 fused: ratio {:.2}", fused_median[1] / fused_median[0]);
     Ok(())
 }

@@ -69,8 +69,9 @@ pub struct AgentConfig {
     /// Option beyond the paper: reparameterised policy gradient, L_pi = mean(alpha log pi - Q1 - log p),
     /// instead of the likelihood-ratio estimator. Default false.
     pub reparameterize: bool,
-    /// Option beyond the paper: two Q nets (clipped double Q); the V target uses min(Q1, Q2), the policy
-    /// loss and the TD errors use Q1. Default false.
+    /// Option beyond the paper: two Q nets (clipped double Q); the V target uses min(Q1, Q2), and so
+    /// does the reparameterised policy loss; the likelihood-ratio policy loss and the TD errors use
+    /// Q1. Default false.
     pub twin_q: bool,
     /// Option beyond the paper: learn the temperature alpha against a target entropy. alpha multiplies
     /// the entropy and action-prior terms; rewards are still multiplied by `scale_reward`. Default false.

@@ -214,9 +214,10 @@ impl Learner {
         let v_tgt = v_target(&q_pi_min, &log_pi, &log_prior, alpha)?;
         let v_loss = v_loss(&v, &v_tgt)?;
 
-        // Policy: likelihood ratio (Eq. 2.27, code's sign) or, as an option, reparameterised.
+        // Policy: likelihood ratio (Eq. 2.27, code's sign, with Q1) or, as an option,
+        // reparameterised through min(Q1, Q2) (clipped double Q, as SAC's second version).
         let policy_loss = if cfg.reparameterize {
-            reparameterized_policy_loss(&log_pi, &q_pi[0], &log_prior, alpha)?
+            reparameterized_policy_loss(&log_pi, &q_pi_min, &log_prior, alpha)?
         } else {
             likelihood_ratio_policy_loss(&log_pi, &q_pi[0], &v.detach(), &log_prior, alpha)?
         };

@@ -11,7 +11,7 @@ use crate::config::AgentConfig;
 use crate::critic::{QNet, ValueNet};
 use crate::error::Result;
 use crate::policy::LatentPolicy;
-use crate::vars::{SeededInit, export, import};
+use crate::vars::{SeededInit, check, export, import, set_checked};
 
 /// A model and the variables it was built from; names in `vars` are relative to the network.
 pub(crate) struct Net<M> {
@@ -45,6 +45,14 @@ impl<M> Net<M> {
 
     pub fn import(&self, tensors: &HashMap<String, Tensor>) -> Result<()> {
         import(self.role, &self.vars, tensors)
+    }
+
+    pub fn check(&self, tensors: &HashMap<String, Tensor>) -> Result<()> {
+        check(self.role, &self.vars, tensors)
+    }
+
+    fn set_checked(&self, tensors: &HashMap<String, Tensor>) -> Result<()> {
+        set_checked(self.role, &self.vars, tensors)
     }
 }
 
@@ -89,13 +97,20 @@ impl Networks {
         self.v_target.export(out)
     }
 
-    /// Sets every network from `tensors`; all names must be present.
+    /// Sets every network from `tensors`; all names must be present with their shapes and finite
+    /// values, else no network changes (a bad snapshot leaves an actor acting as before).
     pub fn import(&self, tensors: &HashMap<String, Tensor>) -> Result<()> {
-        self.policy.import(tensors)?;
+        self.policy.check(tensors)?;
         for q in &self.qs {
-            q.import(tensors)?;
+            q.check(tensors)?;
         }
-        self.v.import(tensors)?;
-        self.v_target.import(tensors)
+        self.v.check(tensors)?;
+        self.v_target.check(tensors)?;
+        self.policy.set_checked(tensors)?;
+        for q in &self.qs {
+            q.set_checked(tensors)?;
+        }
+        self.v.set_checked(tensors)?;
+        self.v_target.set_checked(tensors)
     }
 }

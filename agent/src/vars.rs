@@ -95,8 +95,10 @@ pub(crate) fn export(role: &str, map: &VarMap, out: &mut Vec<(String, Tensor)>) 
     Ok(())
 }
 
-/// Sets every variable of `map` from `tensors[{role}.{name}]`; all must be present with the same shape.
-pub(crate) fn import(role: &str, map: &VarMap, tensors: &HashMap<String, Tensor>) -> Result<()> {
+/// Checks that `tensors` holds every variable of `map` as `{role}.{name}` with its shape and only
+/// finite values, changing nothing: the first half of an import that either takes a whole snapshot
+/// or leaves the weights as they were.
+pub(crate) fn check(role: &str, map: &VarMap, tensors: &HashMap<String, Tensor>) -> Result<()> {
     for (name, var) in sorted_vars(map)? {
         let key = format!("{role}.{name}");
         let t = tensors.get(&key).ok_or_else(|| Error::BadSnapshot(format!("missing tensor {key}")))?;
@@ -107,7 +109,25 @@ pub(crate) fn import(role: &str, map: &VarMap, tensors: &HashMap<String, Tensor>
                 var.shape()
             )));
         }
-        var.set(&t.to_dtype(var.dtype())?)?;
+        let values = t.to_dtype(candle_core::DType::F32)?.flatten_all()?.to_vec1::<f32>()?;
+        if let Some(bad) = values.iter().find(|v| !v.is_finite()) {
+            return Err(Error::BadSnapshot(format!("{key}: non-finite value {bad}")));
+        }
+    }
+    Ok(())
+}
+
+/// Sets every variable of `map` from `tensors[{role}.{name}]`; all must be present with the same shape
+/// and finite, else nothing is set.
+pub(crate) fn import(role: &str, map: &VarMap, tensors: &HashMap<String, Tensor>) -> Result<()> {
+    check(role, map, tensors)?;
+    set_checked(role, map, tensors)
+}
+
+/// The second half of [`import`]: sets every variable, `tensors` having passed [`check`].
+pub(crate) fn set_checked(role: &str, map: &VarMap, tensors: &HashMap<String, Tensor>) -> Result<()> {
+    for (name, var) in sorted_vars(map)? {
+        var.set(&tensors[&format!("{role}.{name}")].to_dtype(var.dtype())?)?;
     }
     Ok(())
 }

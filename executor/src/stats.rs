@@ -17,6 +17,7 @@ pub(crate) fn report(node: NodeId, progress: &Progress, rejects: &Rejects) -> St
     }
     r.push_metric("executor/allowed_env_steps", p.allowed_env_steps as f64);
     r.push_metric("executor/weights_loads", p.weights_loads as f64);
+    r.push_metric("executor/weights_unloadable", p.weights_unloadable as f64);
     r.push_metric("executor/batches", p.batches as f64);
     r.push_metric("executor/dropped_non_finite", p.dropped_non_finite as f64);
     r.push_metric("executor/blocked_ms_total", p.blocked_ms_total as f64);

@@ -103,6 +103,8 @@ pub struct Progress {
     pub allowed_env_steps: u64,
     /// Weight loads so far.
     pub weights_loads: u64,
+    /// Snapshots that could not be loaded (kept acting with the previous weights).
+    pub weights_unloadable: u64,
     /// Batches handed to the shell.
     pub batches: u64,
     /// Non-finite steps dropped.
@@ -138,6 +140,8 @@ pub struct WorkerReport {
     /// Weight loads (the first one included); each is a newer version than the last (the inbox and
     /// the fetch task only pass newer ones on), so this is also the number of versions acted with.
     pub weights_loads: u64,
+    /// Snapshots that could not be loaded; the worker went on with the weights it had.
+    pub weights_unloadable: u64,
     /// Non-finite steps dropped.
     pub dropped_non_finite: u64,
     /// Total time waiting, ms.
@@ -159,6 +163,8 @@ struct Worker {
     waiting: Option<Waiting>,
     last_return: Option<f64>,
     heard_at: Option<Instant>,
+    /// Counts unloadable snapshots and rate-limits their warnings.
+    rejects: node::Rejects,
 }
 
 /// Runs the rollout until the inbox says stop (or the shell goes away); errors end it early.
@@ -182,6 +188,7 @@ pub fn run(
         waiting: None,
         last_return: None,
         heard_at: None,
+        rejects: node::Rejects::default(),
     };
     w.run()?;
     Ok(w.report)
@@ -208,8 +215,17 @@ impl Worker {
                 break;
             }
             if let Some(snapshot) = weights {
-                self.rollout.load(&snapshot)?;
-                self.report.weights_loads += 1;
+                // Bad weights (a corrupt or forged frame, wrong shapes, non-finite values) never stop
+                // the executor: it keeps acting with the weights it has (the load is all or nothing)
+                // and the fetch task waits for a newer version.
+                match self.rollout.load(&snapshot) {
+                    Ok(()) => self.report.weights_loads += 1,
+                    Err(error) => {
+                        self.report.weights_unloadable += 1;
+                        let detail = format!("version {}: {error}", snapshot.version);
+                        self.rejects.record("weights/unloadable", &detail, Instant::now());
+                    }
+                }
             }
             self.step = step;
             let wait = self.check();
@@ -343,6 +359,7 @@ impl Worker {
             step: self.step,
             allowed_env_steps: self.allowed,
             weights_loads: self.report.weights_loads,
+            weights_unloadable: self.report.weights_unloadable,
             batches: self.report.batches,
             dropped_non_finite: self.report.dropped_non_finite,
             blocked_ms_total: self.blocked_ms_total_now(),
@@ -426,5 +443,44 @@ mod tests {
         assert_eq!(report.env_steps, 11);
         assert_eq!(report.max_over_allowance, 0);
         assert_eq!(report.weights_loads, 1);
+    }
+
+    #[test]
+    fn unloadable_weights_are_counted_and_acting_goes_on_with_the_old_ones() {
+        let env = Task::InvertedPendulum.make(1).unwrap();
+        let cfg = AgentConfig {
+            critic_hidden: vec![8],
+            embedding_layers: vec![8, 2],
+            ..AgentConfig::for_task(env.spec().obs_dim, env.spec().act_dim)
+        };
+        let weights =
+            agent::ParamSnapshot { version: 3, ..Learner::new(cfg.clone(), 1).unwrap().snapshot().unwrap() };
+        let wrong_shapes = AgentConfig { critic_hidden: vec![5], ..cfg.clone() };
+        let wrong_shapes =
+            agent::ParamSnapshot { version: 7, ..Learner::new(wrong_shapes, 1).unwrap().snapshot().unwrap() };
+        let corrupt = agent::ParamSnapshot { version: 5, safetensors: vec![0xff; 64] };
+        let rollout = Rollout::new(0, env, Actor::new(cfg, 2).unwrap(), 1);
+        let inbox = Arc::new(Inbox::default());
+        let (tx, mut rx) = mpsc::channel(1024);
+        let settings =
+            ExecutorSettings { batch_transitions: 4, report_interval_ms: 10, ..ExecutorSettings::default() };
+        let worker = {
+            let inbox = inbox.clone();
+            std::thread::spawn(move || run(0, rollout, inbox, tx, settings))
+        };
+        inbox.set_step(step(10, 5));
+        inbox.set_weights(weights);
+        until(&mut rx, |r| r.blocked && r.env_steps == 5);
+        // Each bad snapshot arrives with one more learner step: the worker must take that step with
+        // the weights it had, whatever the snapshot held.
+        for (k, bad) in [corrupt, wrong_shapes].into_iter().enumerate() {
+            inbox.set_weights(bad);
+            inbox.set_step(step(11 + k as u64, 5));
+            let (r, _) = until(&mut rx, |r| r.blocked && r.env_steps == 7 + 2 * k as u64);
+            assert_eq!(r.weights_version, 3, "still acting with version 3");
+        }
+        inbox.stop();
+        let report = worker.join().unwrap().unwrap();
+        assert_eq!((report.weights_loads, report.weights_unloadable, report.env_steps), (1, 2, 9));
     }
 }

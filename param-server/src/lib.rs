@@ -29,6 +29,7 @@
 #![deny(missing_docs)]
 
 mod barrier;
+mod body;
 mod config;
 mod starvation;
 mod state;
@@ -37,6 +38,7 @@ mod store;
 use std::time::{Duration, Instant};
 
 pub use barrier::{Barrier, BarrierRule};
+pub use body::{BadBody, Schema, check_body};
 pub use config::ParamServerConfig;
 use node::{Bus, Shutdown};
 use proto::{Role, Topic, topics};

@@ -6,7 +6,7 @@ use node::Rejects;
 use proto::{BarrierReport, BlockedReason, GlobalStep, LearnerStep, NodeId, StatsReport, WeightsSnapshot};
 
 use crate::starvation::StarvationWatch;
-use crate::{Barrier, BarrierRule, ParamStore, Rejected};
+use crate::{BadBody, Barrier, BarrierRule, ParamStore, Rejected, Schema, check_body};
 
 /// What the param server has done.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
@@ -44,6 +44,8 @@ pub struct State {
     learner_moved_at: Instant,
     /// Starved learner and blocked barrier: when they make a deadlock.
     starvation: StarvationWatch,
+    /// The tensor names and shapes of the weights taken first; every later body must match.
+    schema: Option<Schema>,
 }
 
 impl State {
@@ -56,6 +58,7 @@ impl State {
             rejects: Rejects::default(),
             learner_moved_at: Instant::now(),
             starvation: StarvationWatch::default(),
+            schema: None,
         }
     }
 
@@ -68,6 +71,18 @@ impl State {
                 return false;
             }
         };
+        // Repeats and old versions are refused by the store before their bodies are read.
+        let newer = self.store.latest().is_none_or(|held| snapshot.version > held.version);
+        if newer {
+            match check_body(&snapshot.safetensors, self.schema.as_ref()) {
+                Ok(schema) => self.schema = Some(schema),
+                Err(BadBody { reason, detail }) => {
+                    let detail = format!("version {}: {detail}", snapshot.version);
+                    self.rejects.record(&format!("weights/{reason}"), &detail, Instant::now());
+                    return false;
+                }
+            }
+        }
         let learner_step = snapshot.learner_step;
         match self.store.offer(snapshot) {
             Ok(version) => {
@@ -257,8 +272,46 @@ mod tests {
         BarrierRule { env_steps_per_learner_step: 1, warm_up_transitions: 100, max_weight_lag: None }
     }
 
+    /// A safetensors body with one `[rows, 2]` tensor of `value`s.
+    fn body(rows: usize, value: f32) -> Vec<u8> {
+        let data: Vec<u8> = std::iter::repeat_n(value.to_le_bytes(), rows * 2).flatten().collect();
+        let view =
+            safetensors::tensor::TensorView::new(safetensors::Dtype::F32, vec![rows, 2], &data).unwrap();
+        safetensors::serialize([("policy.w", view)], None).unwrap()
+    }
+
+    fn weights_with(version: u64, safetensors: Vec<u8>) -> Vec<u8> {
+        proto::encode(&WeightsSnapshot { version, learner_step: version, safetensors })
+    }
+
     fn weights(version: u64) -> Vec<u8> {
-        proto::encode(&WeightsSnapshot { version, learner_step: version, safetensors: vec![1, 2, 3] })
+        weights_with(version, body(3, 0.5))
+    }
+
+    #[test]
+    fn bodies_that_do_not_parse_or_fit_are_refused_and_never_served() {
+        let mut s = State::new(rule());
+        assert!(s.on_weights(&weights(10)));
+        // Well-formed frames with a newer version: a body that is not safetensors (a header length
+        // beyond the body, as once forged), other shapes, a NaN. None becomes the latest.
+        let mut forged = vec![0xff; 8];
+        forged.extend_from_slice(b"{}");
+        assert!(!s.on_weights(&weights_with(20, forged)));
+        assert!(!s.on_weights(&weights_with(21, body(4, 0.5))));
+        assert!(!s.on_weights(&weights_with(22, body(3, f32::NAN))));
+        assert_eq!(s.announcement().weights_version, 10);
+        let counts = s.rejects().counts();
+        assert_eq!(
+            (
+                counts["weights/bad_safetensors"],
+                counts["weights/schema_mismatch"],
+                counts["weights/non_finite"]
+            ),
+            (1, 1, 1)
+        );
+        // The run goes on: the next good snapshot is taken.
+        assert!(s.on_weights(&weights(30)));
+        assert_eq!(s.announcement().weights_version, 30);
     }
 
     #[test]

@@ -166,6 +166,8 @@ pub(crate) struct MlpBufs {
     /// dL/d(pre-activation of layer k), `rows x width_k` (empty when not trained; layer 0's may be
     /// unused when the caller keeps it in a shared buffer).
     pub grads: Vec<Vec<f32>>,
+    /// The bias sums of [`input_gradient`]'s derivative passes, which no parameter takes.
+    scratch: Vec<f32>,
     widths: Vec<usize>,
     rows: usize,
 }
@@ -174,7 +176,13 @@ impl MlpBufs {
     /// Buffers for `rows` rows of an MLP with layer widths `widths`.
     pub(crate) fn new(widths: &[usize], rows: usize, trained: bool) -> Self {
         let make = || widths.iter().map(|w| vec![0.0; w * rows]).collect();
-        Self { acts: make(), grads: if trained { make() } else { Vec::new() }, widths: widths.to_vec(), rows }
+        Self {
+            acts: make(),
+            grads: if trained { make() } else { Vec::new() },
+            scratch: vec![0.0; widths.iter().copied().max().unwrap_or(0)],
+            widths: widths.to_vec(),
+            rows,
+        }
     }
 
     /// Layer k's output, the first `rows` rows.
@@ -223,7 +231,8 @@ pub(crate) struct Net<'a> {
 }
 
 impl Net<'_> {
-    fn act(&self, k: usize) -> Activation {
+    /// The activation after layer `k`.
+    pub(crate) fn act(&self, k: usize) -> Activation {
         if k + 1 == self.at.layers.len() { self.output } else { self.hidden }
     }
 }
@@ -270,6 +279,12 @@ pub(crate) fn backward_to_first(
         let (lower, upper) = grads.split_at_mut(k);
         let g = match (k, first.as_mut()) {
             (0, Some(view)) => {
+                if layers.len() == 1 {
+                    // A one-layer net: the caller's output gradient is in grads[0], not yet here.
+                    for i in 0..rows {
+                        view.row_mut(i).copy_from_slice(&upper[0][i * layer.out..(i + 1) * layer.out]);
+                    }
+                }
                 act_backward(view, h, net.act(k), train.bias_grad(layer));
                 train.finished(layer.bias, layer.out);
                 break;
@@ -295,6 +310,39 @@ pub(crate) fn backward_to_first(
             }
         }
         train.finished(layer.weight, layer.out * layer.fan_in);
+    }
+}
+
+/// dL/dx of one input block of layer 0 (weights `input_weight`, `[out_0, cols]`) for the rows
+/// `rows` of `bufs`, from grads[last] = dL/d(output) there, with the net's parameters held fixed:
+/// the backward pass of a frozen network (Q(s, a~) with respect to a~ in the reparameterised
+/// policy loss). No parameter gradient is formed; `dx` is written, or added to with its flag.
+pub(crate) fn input_gradient(
+    gemm: &Gemm,
+    params: &[f32],
+    net: Net,
+    bufs: &mut MlpBufs,
+    rows: std::ops::Range<usize>,
+    input_weight: Mat,
+    (dx, accumulate): (&mut MatMut, bool),
+) {
+    let layers = &net.at.layers;
+    let (from, n) = (rows.start, rows.len());
+    let MlpBufs { acts, grads, scratch, .. } = bufs;
+    for k in (0..layers.len()).rev() {
+        let layer = &layers[k];
+        let span = |width: usize| from * width..(from + n) * width;
+        let h = Mat::dense(&acts[k][span(layer.out)], n, layer.out);
+        let (lower, upper) = grads.split_at_mut(k);
+        let mut g = MatMut::dense(&mut upper[0][span(layer.out)], n, layer.out);
+        act_backward(&mut g, h, net.act(k), &mut scratch[..layer.out]);
+        if k == 0 {
+            gemm.mul(dx, g.as_mat(), input_weight, accumulate);
+            break;
+        }
+        let prev = &layers[k - 1];
+        let mut below = MatMut::dense(&mut lower[k - 1][span(prev.out)], n, prev.out);
+        gemm.mul(&mut below, g.as_mat(), weight(params, layer), false);
     }
 }
 

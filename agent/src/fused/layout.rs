@@ -21,15 +21,26 @@ pub(crate) enum Role {
     Policy,
     /// Q1.
     Q,
+    /// Q2, with twin Q.
+    Q2,
     /// V.
     V,
     /// The target V-bar.
     VTarget,
+    /// log alpha, when the temperature is learned (in checkpoints, not in snapshots).
+    Temperature,
 }
 
 impl Role {
-    /// The trained networks, in the order the candle learner steps their Adams.
-    pub(crate) const TRAINED: [Role; 3] = [Role::Q, Role::V, Role::Policy];
+    /// The trained parameter sets, in the order the candle learner steps their Adams.
+    pub(crate) const TRAINED: [Role; 5] = [Role::Q, Role::Q2, Role::V, Role::Policy, Role::Temperature];
+
+    /// The networks of a weights snapshot.
+    pub(crate) const NETWORKS: [Role; 5] = [Role::Policy, Role::Q, Role::Q2, Role::V, Role::VTarget];
+
+    /// Everything of a checkpoint: the networks and the learned temperature.
+    pub(crate) const ALL: [Role; 6] =
+        [Role::Policy, Role::Q, Role::Q2, Role::V, Role::VTarget, Role::Temperature];
 
     /// Position in [`Role::TRAINED`] (and in the learner's Adam step counts); `None` for V-bar.
     pub(crate) fn adam_index(self) -> Option<usize> {
@@ -41,8 +52,10 @@ impl Role {
         match self {
             Self::Policy => "policy",
             Self::Q => "q1",
+            Self::Q2 => "q2",
             Self::V => "v",
             Self::VTarget => "v_target",
+            Self::Temperature => "temperature",
         }
     }
 }
@@ -97,14 +110,23 @@ pub(crate) struct CouplingAt {
 }
 
 /// The first-layer weights that multiply s, stacked: rows `[0, v)` are V's, `[v, v + e)` the
-/// embedding's, `[v + e, rows)` Q's observation weights.
+/// embedding's, then each Q's observation weights (Q1, then Q2 with twin Q; see [`QAt::obs`]).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct ObsBlock {
     pub weight: usize,
     pub rows: usize,
     pub v: usize,
     pub embedding: usize,
-    pub q: usize,
+}
+
+/// One Q network: its role, layers (layer 0's `weight` is its observation matrix, inside the
+/// [`ObsBlock`] at rows `obs ..`), and its `layer0.weight_action`, `[H_q, act_dim]`.
+#[derive(Clone, Debug)]
+pub(crate) struct QAt {
+    pub role: Role,
+    pub mlp: MlpAt,
+    pub obs: usize,
+    pub action_weight: usize,
 }
 
 /// V-bar's array at `target` is Polyak-averaged towards V's array at `online` (same name).
@@ -123,12 +145,14 @@ pub(crate) struct Layout {
     pub obs: ObsBlock,
     pub v: MlpAt,
     pub v_target: MlpAt,
-    /// Q's layers; layer 0's `weight` is its observation matrix (inside `obs`).
-    pub q: MlpAt,
-    /// Q's `layer0.weight_action`, `[H_q, act_dim]`.
-    pub q_action_weight: usize,
+    /// Q1, then Q2 with twin Q.
+    pub qs: Vec<QAt>,
     pub embedding: MlpAt,
+    /// The coupling layers that move something, in order; a 1-d action's odd layer is the
+    /// identity and has no parameters (as in `coupling.rs`), so it is left out.
     pub couplings: Vec<CouplingAt>,
+    /// log alpha's offset, when the temperature is learned.
+    pub log_alpha: Option<usize>,
     /// V-bar's arrays with their V counterparts; every target lies after its online array.
     pub polyak: Vec<PolyakPair>,
 }
@@ -187,40 +211,53 @@ impl Builder {
 }
 
 impl Layout {
-    /// The arena of `cfg`'s networks (single Q, as [`FusedLearner::supports`](super::FusedLearner::supports)
-    /// requires).
+    /// The arena of `cfg`'s networks.
     pub(crate) fn new(cfg: &AgentConfig) -> Self {
         let (obs, act) = (cfg.obs_dim, cfg.act_dim);
         let mut critic = cfg.critic_hidden.clone();
         critic.push(1);
         let (h_v, h_e, h_q) = (critic[0], cfg.embedding_layers[0], critic[0]);
+        let q_roles: &[Role] = if cfg.twin_q { &[Role::Q, Role::Q2] } else { &[Role::Q] };
         let mut b = Builder { arrays: Vec::new(), len: 0 };
         let v_w = b.push(Role::V, "layer0.weight".into(), &[h_v, obs]);
         let e_w = b.push(Role::Policy, "embedding.layer0.weight".into(), &[h_e, obs]);
-        let q_w = b.push(Role::Q, "layer0.weight_observation".into(), &[h_q, obs]);
-        let obs_block = ObsBlock { weight: v_w, rows: h_v + h_e + h_q, v: 0, embedding: h_v, q: h_v + h_e };
+        let q_ws: Vec<usize> =
+            q_roles.iter().map(|r| b.push(*r, "layer0.weight_observation".into(), &[h_q, obs])).collect();
+        let obs_block = ObsBlock { weight: v_w, rows: h_v + h_e + q_roles.len() * h_q, v: 0, embedding: h_v };
         let v = b.mlp(Role::V, "", obs, &critic, Some(v_w));
-        let q_action_weight = b.push(Role::Q, "layer0.weight_action".into(), &[h_q, act]);
-        let q = b.mlp(Role::Q, "", obs, &critic, Some(q_w));
+        let qs = q_roles
+            .iter()
+            .zip(q_ws)
+            .enumerate()
+            .map(|(k, (role, q_w))| {
+                let action_weight = b.push(*role, "layer0.weight_action".into(), &[h_q, act]);
+                let mlp = b.mlp(*role, "", obs, &critic, Some(q_w));
+                QAt { role: *role, mlp, obs: h_v + h_e + k * h_q, action_weight }
+            })
+            .collect();
         let embedding = b.mlp(Role::Policy, "embedding.", obs, &cfg.embedding_layers, Some(e_w));
         let context = *cfg.embedding_layers.last().unwrap_or(&0);
         let split = act / 2;
         let couplings = (0..cfg.coupling_layers)
-            .map(|i| {
+            .filter_map(|i| {
                 let (kept_from, kept, moved_from, moved) = match Parity::of_layer(i) {
                     Parity::Odd => (split, act - split, 0, split),
                     Parity::Even => (0, split, split, act - split),
                 };
+                if moved == 0 {
+                    return None;
+                }
                 let mut widths = cfg.coupling_hidden.clone();
                 widths.push(moved);
                 let scale =
                     b.mlp(Role::Policy, &format!("coupling{i}.scale."), kept + context, &widths, None);
                 let translation =
                     b.mlp(Role::Policy, &format!("coupling{i}.translation."), kept + context, &widths, None);
-                CouplingAt { kept_from, kept, moved_from, moved, scale, translation }
+                Some(CouplingAt { kept_from, kept, moved_from, moved, scale, translation })
             })
             .collect();
         let v_target = b.mlp(Role::VTarget, "", obs, &critic, None);
+        let log_alpha = cfg.learn_temperature.then(|| b.push(Role::Temperature, "log_alpha".into(), &[1]));
         let polyak = b
             .arrays
             .iter()
@@ -236,12 +273,17 @@ impl Layout {
             obs: obs_block,
             v,
             v_target,
-            q,
-            q_action_weight,
+            qs,
             embedding,
             couplings,
+            log_alpha,
             polyak,
         }
+    }
+
+    /// Whether any array belongs to `role` (Q2 and the temperature are optional).
+    pub(crate) fn has(&self, role: Role) -> bool {
+        self.arrays.iter().any(|a| a.role == role)
     }
 
     /// Copies `tensors[{prefix}.{name}]` into `dst` for every array of the roles in `roles`; all
@@ -301,7 +343,7 @@ mod tests {
             ..AgentConfig::for_task(3, 5)
         };
         let layout = Layout::new(&cfg);
-        let snapshot = Learner::new(cfg, 1).unwrap().snapshot().unwrap().tensors().unwrap();
+        let snapshot = Learner::new(cfg.clone(), 1).unwrap().snapshot().unwrap().tensors().unwrap();
         let mut ours: Vec<(String, Vec<usize>)> = layout
             .arrays
             .iter()
@@ -312,9 +354,34 @@ mod tests {
         ours.sort();
         theirs.sort();
         assert_eq!(ours, theirs);
+        // With every option and a 1-d action: Q2 beside Q1 in the stacked block, log alpha as in
+        // the candle checkpoint, no arrays for the identity coupling layer.
+        for options in [
+            AgentConfig { twin_q: true, learn_temperature: true, ..cfg.clone() },
+            AgentConfig { twin_q: true, learn_temperature: true, act_dim: 1, ..cfg.clone() },
+        ] {
+            let layout = Layout::new(&options);
+            let checkpoint = Learner::new(options.clone(), 1).unwrap().checkpoint().unwrap();
+            let tensors = crate::params::decode(&checkpoint.safetensors).unwrap();
+            let mut theirs: Vec<(String, Vec<usize>)> = tensors
+                .iter()
+                .filter(|(n, _)| !n.starts_with("adam.") && !n.starts_with("learner."))
+                .map(|(n, t)| (n.clone(), t.dims().to_vec()))
+                .collect();
+            let mut ours: Vec<(String, Vec<usize>)> = layout
+                .arrays
+                .iter()
+                .map(|a| (format!("{}.{}", a.role.name(), a.name), a.shape.clone()))
+                .collect();
+            ours.sort();
+            theirs.sort();
+            assert_eq!(ours, theirs, "act_dim {}", options.act_dim);
+            assert_eq!((layout.obs.rows, layout.qs[1].obs), (6 + 5 + 2 * 6, 17));
+            assert!(layout.has(Role::Q2) && layout.log_alpha.is_some());
+        }
         assert_eq!(layout.len, layout.arrays.iter().map(|a| a.len).sum::<usize>());
         // The stacked first layer: V's, the embedding's and Q's observation weights, adjacent.
-        assert_eq!((layout.obs.rows, layout.obs.embedding, layout.obs.q), (6 + 5 + 6, 6, 11));
+        assert_eq!((layout.obs.rows, layout.obs.embedding, layout.qs[0].obs), (6 + 5 + 6, 6, 11));
         assert_eq!(layout.embedding.layers[0].weight, layout.obs.weight + 6 * 3);
         // Odd (first) layer keeps the upper half, 5 = 2 moved + 3 kept.
         let c = &layout.couplings[0];

@@ -15,12 +15,14 @@
 //!
 //! # What is fused
 //!
-//! [`FusedLearner::supports`] accepts the paper's configuration and its shape variations: single
-//! Q, likelihood-ratio policy gradient, fixed temperature (any `initial_temperature`), any layer
-//! widths and number of coupling layers, normal or uniform action prior, squash on or off, ReLU or
-//! linear embedding output (so the hierarchy's higher levels too), IS weights. Not fused (use the
-//! candle [`Learner`](crate::Learner), e.g. through [`AnyLearner`]): `twin_q`, `reparameterize`,
-//! `learn_temperature`, an embedding with a single layer, and a 1-d action.
+//! Every option of [`AgentConfig`]: the paper's configuration (single Q, likelihood-ratio policy
+//! gradient, fixed temperature) and each option beyond it — the reparameterised policy gradient
+//! (through the flow and the tanh), twin Q (clipped double Q), the learned temperature — with any
+//! layer widths (a one-layer embedding included) and number of coupling layers, any action
+//! dimension (a 1-d action's odd coupling layer is the identity), normal or uniform action prior,
+//! squash on or off, ReLU or linear embedding output (so the hierarchy's higher levels too), IS
+//! weights. [`FusedLearner::check_support`] still exists so that a configuration the fused kernels
+//! cannot run would be named, not silently run on candle.
 //!
 //! # Equality with candle
 //!
@@ -63,8 +65,6 @@ use linalg::Gemm;
 use tanh::Tanh;
 use update::Workspace;
 
-const ALL_ROLES: [Role; 4] = [Role::Policy, Role::Q, Role::V, Role::VTarget];
-
 /// The SAC-LSP learner of the supported configurations, fused on `gemm` (see the module doc).
 #[derive(Clone, Debug)]
 pub struct FusedLearner {
@@ -76,8 +76,8 @@ pub struct FusedLearner {
     grads: Vec<f32>,
     adam_m: Vec<f32>,
     adam_v: Vec<f32>,
-    /// Adam step counts of [`Role::TRAINED`], in that order.
-    adam_steps: [u64; 3],
+    /// Adam step counts of [`Role::TRAINED`], in that order (0 for a set the level lacks).
+    adam_steps: [u64; 5],
     adam: AdamConfig,
     gemm: Gemm,
     tanh: Tanh,
@@ -87,22 +87,16 @@ pub struct FusedLearner {
 impl FusedLearner {
     /// Why `cfg` cannot be fused, or `Ok` if it can.
     pub fn check_support(cfg: &AgentConfig) -> Result<()> {
-        let reason = if cfg.twin_q {
-            "twin_q"
-        } else if cfg.reparameterize {
-            "reparameterize"
-        } else if cfg.learn_temperature {
-            "learn_temperature"
-        } else if cfg.embedding_layers.len() < 2 {
-            "a single-layer embedding"
-        } else if cfg.act_dim < 2 {
-            "a 1-d action (its odd coupling layer is the identity)"
-        } else {
-            return Ok(());
-        };
-        Err(Error::InvalidConfig(format!(
-            "the fused learner does not implement {reason}; use the candle Learner"
-        )))
+        // Every option is fused; a level whose every coupling layer is the identity (one coupling
+        // layer on a 1-d action) has no policy parameters to train, which candle accepts.
+        if cfg.act_dim < 2 && cfg.coupling_layers < 2 {
+            return Err(Error::InvalidConfig(
+                "the fused learner does not implement a policy without a non-identity coupling layer \
+                 (act_dim 1 needs coupling_layers >= 2); use the candle Learner"
+                    .into(),
+            ));
+        }
+        Ok(())
     }
 
     /// Whether [`FusedLearner`] implements `cfg`'s update (see the module doc).
@@ -131,10 +125,10 @@ impl FusedLearner {
         let layout = Layout::new(&cfg);
         let n = layout.len;
         let mut params = vec![0.0; n];
-        layout.import(&ALL_ROLES, |r| r.name().to_string(), &t, &mut params)?;
+        layout.import(&Role::ALL, |r| r.name().to_string(), &t, &mut params)?;
         let (mut adam_m, mut adam_v) = (vec![0.0; n], vec![0.0; n]);
-        let mut adam_steps = [0; 3];
-        for (role, steps) in Role::TRAINED.iter().zip(&mut adam_steps) {
+        let mut adam_steps = [0; 5];
+        for (role, steps) in Role::TRAINED.iter().zip(&mut adam_steps).filter(|(r, _)| layout.has(**r)) {
             layout.import(&[*role], |r| format!("adam.{}.m", r.name()), &t, &mut adam_m)?;
             layout.import(&[*role], |r| format!("adam.{}.v", r.name()), &t, &mut adam_v)?;
             *steps = read_i64(&t, &format!("adam.{}.steps", role.name()))? as u64;
@@ -189,9 +183,12 @@ impl FusedLearner {
         self.step
     }
 
-    /// The (fixed) temperature alpha.
+    /// The temperature alpha (learned, or fixed at `initial_temperature`).
     pub fn temperature(&self) -> f32 {
-        self.cfg.initial_temperature
+        match self.layout.log_alpha {
+            Some(at) => f64::from(self.params[at]).exp() as f32,
+            None => self.cfg.initial_temperature,
+        }
     }
 
     /// One simultaneous update of every network from `batch` (§1.3), then
@@ -204,14 +201,14 @@ impl FusedLearner {
     /// Every network's weights, versioned by the learner step (the candle learner's format).
     pub fn snapshot(&self) -> Result<ParamSnapshot> {
         let mut tensors = Vec::new();
-        self.layout.export(&ALL_ROLES, |r| r.name().to_string(), &self.params, &mut tensors)?;
+        self.layout.export(&Role::NETWORKS, |r| r.name().to_string(), &self.params, &mut tensors)?;
         let safetensors = encode(&tensors, &[("version", self.step.to_string())])?;
         Ok(ParamSnapshot { version: self.step, safetensors })
     }
 
     /// Overwrites every network's weights (not the optimiser state or step) from a snapshot.
     pub fn load_snapshot(&mut self, snapshot: &ParamSnapshot) -> Result<()> {
-        self.layout.import(&ALL_ROLES, |r| r.name().to_string(), &snapshot.tensors()?, &mut self.params)
+        self.layout.import(&Role::NETWORKS, |r| r.name().to_string(), &snapshot.tensors()?, &mut self.params)
     }
 
     /// An actor with this learner's configuration and current weights.
@@ -224,9 +221,10 @@ impl FusedLearner {
     /// The full training state, in the candle learner's checkpoint format.
     pub fn checkpoint(&self) -> Result<Checkpoint> {
         let mut t = Vec::new();
-        self.layout.export(&ALL_ROLES, |r| r.name().to_string(), &self.params, &mut t)?;
+        self.layout.export(&Role::ALL, |r| r.name().to_string(), &self.params, &mut t)?;
         let dev = &Device::Cpu;
-        for (role, steps) in Role::TRAINED.iter().zip(&self.adam_steps) {
+        for (role, steps) in Role::TRAINED.iter().zip(&self.adam_steps).filter(|(r, _)| self.layout.has(**r))
+        {
             self.layout.export(&[*role], |r| format!("adam.{}.m", r.name()), &self.adam_m, &mut t)?;
             self.layout.export(&[*role], |r| format!("adam.{}.v", r.name()), &self.adam_v, &mut t)?;
             t.push((format!("adam.{}.steps", role.name()), Tensor::from_slice(&[*steps as i64], 1, dev)?));

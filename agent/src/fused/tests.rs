@@ -30,8 +30,9 @@ fn tiny() -> AgentConfig {
     }
 }
 
-/// The supported variations: a hierarchy level (no squash, linear embedding output, scale 3) with
-/// three coupling layers, an odd action dimension, the uniform prior, alpha != 1, linear s/t nets.
+/// Shape variations of the paper's configuration: a hierarchy level (no squash, linear embedding
+/// output, scale 3) with three coupling layers, an odd action dimension, the uniform prior,
+/// alpha != 1, linear s/t nets, a one-layer embedding, a 1-d action (odd coupling = identity).
 fn variants() -> Vec<AgentConfig> {
     vec![
         tiny(),
@@ -43,6 +44,35 @@ fn variants() -> Vec<AgentConfig> {
             embedding_layers: vec![4, 6, 3],
             ..tiny()
         },
+        AgentConfig { embedding_layers: vec![4], ..tiny() },
+        AgentConfig { act_dim: 1, coupling_layers: 3, ..tiny() },
+    ]
+}
+
+/// The options beyond the paper, alone and together, on the shapes above: the reparameterised
+/// gradient (squashed, unsquashed with three couplings, 1-d), twin Q, the learned temperature,
+/// and all three with the uniform prior (the ant-v5 default).
+fn option_variants() -> Vec<AgentConfig> {
+    let all = |cfg: AgentConfig| AgentConfig {
+        reparameterize: true,
+        twin_q: true,
+        learn_temperature: true,
+        action_prior: ActionPrior::Uniform,
+        ..cfg
+    };
+    vec![
+        AgentConfig { reparameterize: true, ..tiny() },
+        AgentConfig { reparameterize: true, coupling_layers: 3, act_dim: 5, ..tiny().level_above() },
+        AgentConfig { twin_q: true, ..tiny() },
+        AgentConfig {
+            learn_temperature: true,
+            initial_temperature: 0.3,
+            target_entropy: Some(-1.5),
+            ..tiny()
+        },
+        all(tiny()),
+        all(AgentConfig { embedding_layers: vec![4], initial_temperature: 0.5, ..tiny() }),
+        all(AgentConfig { act_dim: 1, ..tiny() }),
     ]
 }
 
@@ -78,7 +108,16 @@ fn assert_metrics_close(fused: &Metrics, candle: &Metrics, rel: f32) {
     for (name, f, c) in pairs {
         assert!(close(f, c, rel), "{name}: fused {f} vs candle {c}");
     }
-    assert_eq!((fused.q2_loss, fused.temperature_loss), (None, None));
+    for (name, f, c) in [
+        ("q2_loss", fused.q2_loss, candle.q2_loss),
+        ("temperature_loss", fused.temperature_loss, candle.temperature_loss),
+    ] {
+        match (f, c) {
+            (Some(f), Some(c)) => assert!(close(f, c, rel), "{name}: fused {f} vs candle {c}"),
+            (None, None) => {}
+            _ => panic!("{name}: fused {f:?} vs candle {c:?}"),
+        }
+    }
 }
 
 /// Largest |a - b| / max(1, |a|, |b|) (absolute for parameters, relative for Adam's second moments,
@@ -180,20 +219,34 @@ struct Tolerance {
 /// Exact tanh: bit-identical (the one non-zero case is summation order in one GEMM, 5e-10).
 const EXACT: Tolerance = Tolerance { params: 1e-8, checkpoint: 1e-6 };
 /// Fast tanh: parameters within 1e-6 in practice; Adam's first moments, averages of gradients
-/// that cancel over the batch, keep the relative differences of the gradients (~1e-5).
-const FAST: Tolerance = Tolerance { params: 1e-5, checkpoint: 1e-4 };
+/// that cancel over the batch, keep the relative differences of the gradients (~1e-5, up to
+/// 1.7e-4 with a one-layer embedding, whose four ReLU features feed the couplings directly; with
+/// exact tanh that configuration is bit-identical, so the difference is the tanh's rounding).
+const FAST: Tolerance = Tolerance { params: 1e-5, checkpoint: 5e-4 };
+
+/// The options beyond the paper sum their gradients in other orders than candle's graph does
+/// (the reparameterised path through the flow, the Qs' input gradients), so even with exact tanh
+/// they agree to rounding, not bit for bit; Adam's normalised steps keep that at ~1e-6 of the
+/// parameters.
+const OPTIONS: Tolerance = Tolerance { params: 2e-5, checkpoint: 2e-4 };
 
 /// N updates of both learners from one state: metrics, TD errors, parameters and checkpoints.
 fn run_side_by_side(cfg: AgentConfig, batches: &[Batch], updates: usize, exact: bool) {
-    let tol = if exact { EXACT } else { FAST };
+    let paper = !(cfg.reparameterize || cfg.twin_q || cfg.learn_temperature);
+    let tol = match (paper, exact) {
+        (true, true) => EXACT,
+        (true, false) => FAST,
+        (false, _) => OPTIONS,
+    };
+    let metrics_rel = if paper { 1e-5 } else { 1e-4 };
     let mut candle = Learner::new(cfg.clone(), 5).unwrap();
     let mut fused = FusedLearner::from_learner(&candle).unwrap().with_exact_tanh(exact);
     for step in 0..updates {
         let b = &batches[step % batches.len()];
         let (c, f) = (candle.update(b).unwrap(), fused.update(b).unwrap());
-        assert_metrics_close(&f.metrics, &c.metrics, 1e-5);
+        assert_metrics_close(&f.metrics, &c.metrics, metrics_rel);
         for (i, (x, y)) in f.td_errors.iter().zip(&c.td_errors).enumerate() {
-            assert!(close(*x, *y, 1e-5), "update {step}: td[{i}] fused {x} vs candle {y}");
+            assert!(close(*x, *y, metrics_rel), "update {step}: td[{i}] fused {x} vs candle {y}");
         }
     }
     let (fs, cs) = (fused.snapshot().unwrap(), candle.snapshot().unwrap());
@@ -221,11 +274,30 @@ fn updates_match_candle_on_small_networks() {
 }
 
 #[test]
+fn updates_match_candle_for_every_option() {
+    for (k, cfg) in option_variants().into_iter().enumerate() {
+        let batches: Vec<Batch> = (0..3).map(|s| batch(&cfg, 7 + s, 40 + s as u64, k % 2 == 0)).collect();
+        run_side_by_side(cfg.clone(), &batches, 15, true);
+        run_side_by_side(cfg, &batches, 15, false);
+    }
+}
+
+#[test]
 fn updates_match_candle_at_ant_sizes() {
     let cfg = AgentConfig::for_task(105, 8);
     let batches = [batch(&cfg, 128, 1, true), batch(&cfg, 128, 2, false)];
     run_side_by_side(cfg.clone(), &batches, 3, true);
-    run_side_by_side(cfg, &batches, 3, false);
+    run_side_by_side(cfg.clone(), &batches, 3, false);
+    let options = AgentConfig {
+        reparameterize: true,
+        twin_q: true,
+        learn_temperature: true,
+        action_prior: ActionPrior::Uniform,
+        scale_reward: 1.0,
+        ..cfg
+    };
+    run_side_by_side(options.clone(), &batches, 3, true);
+    run_side_by_side(options, &batches, 3, false);
 }
 
 #[test]
@@ -286,23 +358,17 @@ fn batch_size_changes_reallocate_and_bad_batches_are_refused() {
 }
 
 #[test]
-fn dispatch_picks_fused_only_for_supported_configs() {
+fn dispatch_runs_every_option_fused_and_names_what_it_cannot() {
     let paper = AgentConfig::default();
     assert!(FusedLearner::supports(&paper) && FusedLearner::supports(&paper.level_above()));
-    for (cfg, reason) in [
-        (AgentConfig { twin_q: true, ..tiny() }, "twin_q"),
-        (AgentConfig { reparameterize: true, ..tiny() }, "reparameterize"),
-        (AgentConfig { learn_temperature: true, ..tiny() }, "learn_temperature"),
-        (AgentConfig { embedding_layers: vec![4], ..tiny() }, "single-layer"),
-        (AgentConfig { act_dim: 1, ..tiny() }, "1-d action"),
-    ] {
-        assert!(!FusedLearner::supports(&cfg));
-        assert_eq!(Backend::Auto.resolve(&cfg).unwrap(), Backend::Candle);
-        let err = AnyLearner::new(cfg.clone(), 1, Backend::Fused).unwrap_err().to_string();
-        assert!(err.contains(reason), "{err}");
+    for cfg in variants().into_iter().chain(option_variants()) {
+        assert_eq!(Backend::Auto.resolve(&cfg).unwrap(), Backend::Fused, "{cfg:?}");
     }
-    let twin = AgentConfig { twin_q: true, ..tiny() };
-    assert_eq!(AnyLearner::new(twin, 1, Backend::Auto).unwrap().backend(), Backend::Candle);
+    // A policy with no coupling layer that moves anything: candle only, and said so.
+    let identity = AgentConfig { act_dim: 1, coupling_layers: 1, ..tiny() };
+    assert_eq!(Backend::Auto.resolve(&identity).unwrap(), Backend::Candle);
+    let err = AnyLearner::new(identity, 1, Backend::Fused).unwrap_err().to_string();
+    assert!(err.contains("coupling"), "{err}");
     let cfg = tiny();
     let b = batch(&cfg, 5, 9, false);
     let mut auto = AnyLearner::new(cfg.clone(), 3, Backend::Auto).unwrap();
@@ -313,4 +379,13 @@ fn dispatch_picks_fused_only_for_supported_configs() {
     assert_eq!((auto.step(), auto.temperature().unwrap(), auto.config()), (1, 1.0, &cfg));
     let resumed = AnyLearner::from_checkpoint(cfg, &candle.checkpoint().unwrap(), Backend::Fused).unwrap();
     assert_eq!(resumed.step(), 1);
+    // A learned temperature moves, and a fused checkpoint carries it (and its Adam) to candle.
+    let learned = AgentConfig { learn_temperature: true, reparameterize: true, twin_q: true, ..tiny() };
+    let mut fused = FusedLearner::new(learned.clone(), 2).unwrap();
+    for _ in 0..3 {
+        fused.update(&b).unwrap();
+    }
+    assert_ne!(fused.temperature(), 1.0);
+    let back = Learner::from_checkpoint(learned, &fused.checkpoint().unwrap()).unwrap();
+    assert_eq!(back.temperature().unwrap(), fused.temperature());
 }
