@@ -87,6 +87,12 @@ impl Actor {
         self.fixed_latent = (0..self.cfg.act_dim).map(|_| rng.sample(StandardNormal)).collect();
     }
 
+    /// Sets the fixed latent to h = 0 (the counterpart of a Gaussian policy's mean action) until the
+    /// next redraw.
+    pub fn zero_fixed_latent(&mut self) {
+        self.fixed_latent = vec![0.0; self.cfg.act_dim];
+    }
+
     /// Acts on one observation.
     pub fn act(&mut self, obs: &[f32], mode: Mode) -> Result<Act> {
         if obs.len() != self.cfg.obs_dim {

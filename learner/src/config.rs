@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use agent::{AgentConfig, Backend};
 use node::RunKeys;
+use proto::EvalMode;
 use serde::Deserialize;
 use sim::Task;
 
@@ -17,6 +18,12 @@ pub const CHECKPOINT_DIR_ENV: &str = "SACLSP_CHECKPOINT_DIR";
 pub struct LearnerSettings {
     /// Sample requests kept in flight, so a batch is ready whenever an update ends. Default 3.
     pub prefetch_batches: u32,
+    /// Batches per sample request: each reply carries this many batches' transitions and is dealt
+    /// out into that many updates (`batch.rs`, `Sampled::split`). On one host the bus's cost is
+    /// mostly per message (thread wake-ups on both sides), so this frees CPU for the executors at
+    /// the same updates/s. Default 1; `[agent] batch_size` times this must not exceed the replay
+    /// server's `max_batch_size`.
+    pub batches_per_request: u32,
     /// How long one sample request may take before it counts as unanswered and is re-sent; must
     /// exceed the replay server's `request_deadline_ms`. Default 5000.
     pub sample_timeout_ms: u64,
@@ -26,9 +33,16 @@ pub struct LearnerSettings {
     pub announce_every_updates: u64,
     /// Updates per epoch: the unit of evaluation and checkpoints. Default 1000, as the paper.
     pub epoch_length_updates: u64,
-    /// Deterministic evaluation episodes after each epoch (on a thread of their own). 0 = none.
+    /// Episodes per evaluation (on a thread of their own, niced by `deploy/local.sh`). 0 = none.
     /// Default 1, as the paper.
     pub eval_episodes: u32,
+    /// How the evaluation picks the latent: `fixed_latent` (default, the paper's: one h ~ N(0, I)
+    /// per evaluation), `zero_latent` (h = 0) or `stochastic`.
+    pub eval_mode: EvalMode,
+    /// Evaluate after every this many epochs. One evaluation runs at a time: one due while the
+    /// previous still runs is skipped and counted (`learner/evals_skipped`), so on two cores the
+    /// evaluations never hold up the updates. Default 1.
+    pub eval_every_epochs: u64,
     /// Write a checkpoint every this many epochs (0: only at shutdown). Default 100.
     pub checkpoint_every_epochs: u64,
     /// Where checkpoints go; the newest one found there at start is resumed from. None = no checkpoints.
@@ -47,11 +61,14 @@ impl Default for LearnerSettings {
     fn default() -> Self {
         Self {
             prefetch_batches: 3,
+            batches_per_request: 1,
             sample_timeout_ms: 5000,
             publish_weights_every_updates: 100,
             announce_every_updates: 10,
             epoch_length_updates: 1000,
             eval_episodes: 1,
+            eval_mode: EvalMode::FixedLatent,
+            eval_every_epochs: 1,
             checkpoint_every_epochs: 100,
             checkpoint_dir: None,
             max_updates: None,
@@ -107,10 +124,12 @@ impl node::RoleConfig for LearnerConfig {
         let s = &self.learner;
         let positive = [
             ("prefetch_batches", u64::from(s.prefetch_batches)),
+            ("batches_per_request", u64::from(s.batches_per_request)),
             ("sample_timeout_ms", s.sample_timeout_ms),
             ("publish_weights_every_updates", s.publish_weights_every_updates),
             ("announce_every_updates", s.announce_every_updates),
             ("epoch_length_updates", s.epoch_length_updates),
+            ("eval_every_epochs", s.eval_every_epochs),
             ("stats_interval_ms", s.stats_interval_ms),
         ];
         if let Some(key) = node::config::first_zero(&positive) {
@@ -128,8 +147,11 @@ impl node::RoleConfig for LearnerConfig {
         if s.prefetch_batches > 64 {
             return Err("[learner] prefetch_batches must be at most 64".into());
         }
-        if self.agent.batch_size > proto::MAX_BATCH_LEN {
-            return Err(format!("[agent] batch_size must be at most {}", proto::MAX_BATCH_LEN));
+        if self.agent.batch_size * s.batches_per_request as usize > proto::MAX_BATCH_LEN {
+            return Err(format!(
+                "[agent] batch_size times [learner] batches_per_request must be at most {}",
+                proto::MAX_BATCH_LEN
+            ));
         }
         self.task()?;
         self.agent.validate().map_err(|e| format!("[agent] {e}"))

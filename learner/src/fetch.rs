@@ -91,6 +91,8 @@ pub struct Requests {
     pub step: Arc<AtomicU64>,
     /// Transitions per batch.
     pub batch_size: u32,
+    /// Batches per sample request (see `[learner] batches_per_request`).
+    pub batches_per_request: u32,
     /// Per-request timeout.
     pub timeout: Duration,
     /// Keep IS weights (prioritized replay).
@@ -105,7 +107,7 @@ pub async fn request_loop(r: Requests, batches: mpsc::Sender<Sampled>, mut shutd
         let request = SampleRequest {
             request_id: r.fetcher.next_request.fetch_add(1, Ordering::Relaxed),
             learner_step: r.step.load(Ordering::Relaxed),
-            batch_size: r.batch_size,
+            batch_size: r.batch_size * r.batches_per_request,
         };
         let outcome = tokio::select! {
             _ = shutdown.wait() => return,
@@ -118,9 +120,11 @@ pub async fn request_loop(r: Requests, batches: mpsc::Sender<Sampled>, mut shutd
                     s.waiting = None;
                 });
                 let sampled = Sampled::from_wire(batch, r.prioritized);
-                tokio::select! {
-                    _ = shutdown.wait() => return,
-                    sent = batches.send(sampled) => if sent.is_err() { return },
+                for part in sampled.split(r.batches_per_request as usize) {
+                    tokio::select! {
+                        _ = shutdown.wait() => return,
+                        sent = batches.send(part) => if sent.is_err() { return },
+                    }
                 }
                 continue;
             }

@@ -50,7 +50,7 @@ pub use config::{LearnerConfig, LearnerSettings};
 pub use evaluate::{Evaluation, evaluate};
 pub use fetch::{FetchStatus, Fetcher, Requests, Waiting};
 use node::{Bus, Shutdown};
-use proto::EvalReport;
+use proto::{EvalMode, EvalReport};
 use tokio::sync::mpsc;
 pub use updater::{LossMeans, Out, Progress, Updater, UpdaterReport};
 
@@ -86,6 +86,12 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
         }
         None => AnyLearner::new(config.agent.clone(), seed, s.backend)?,
     };
+    if s.backend == agent::Backend::Auto
+        && let Err(why) = agent::FusedLearner::check_support(&config.agent)
+    {
+        // `auto` never falls back in silence: say which option keeps the fused learner out.
+        tracing::warn!(%why, "backend auto: the candle learner runs the updates (about a third as fast)");
+    }
     tracing::info!(backend = ?learner.backend(), step = learner.step(), "learner up");
     let step = Arc::new(AtomicU64::new(learner.step()));
     let _alive = bus.announce().await?;
@@ -95,10 +101,10 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
         let (tx, rx) = std::sync::mpsc::sync_channel::<(u64, ParamSnapshot)>(1);
         let env = config.task().map_err(anyhow::Error::msg)?.make(seed.wrapping_add(3))?;
         let actor = Actor::new(config.agent.clone(), seed.wrapping_add(5))?;
-        let (out, episodes) = (out_tx.clone(), s.eval_episodes);
+        let (out, episodes, mode) = (out_tx.clone(), s.eval_episodes, s.eval_mode);
         std::thread::Builder::new()
             .name("evaluate".into())
-            .spawn(move || evaluation_thread(env, actor, episodes, rx, out))?;
+            .spawn(move || evaluation_thread(env, actor, (episodes, mode), rx, out))?;
         Some(tx)
     } else {
         None
@@ -115,6 +121,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
         fetcher: fetcher.clone(),
         step: step.clone(),
         batch_size: config.agent.batch_size as u32,
+        batches_per_request: s.batches_per_request,
         timeout: Duration::from_millis(s.sample_timeout_ms),
         prioritized: s.send_priorities,
     };
@@ -192,7 +199,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
 fn evaluation_thread(
     mut env: Box<dyn sim::Environment>,
     mut actor: Actor,
-    episodes: u32,
+    (episodes, mode): (u32, EvalMode),
     requests: std::sync::mpsc::Receiver<(u64, ParamSnapshot)>,
     out: mpsc::Sender<Out>,
 ) {
@@ -201,16 +208,27 @@ fn evaluation_thread(
         let result = actor
             .load(&snapshot)
             .map_err(anyhow::Error::from)
-            .and_then(|()| evaluate(&mut actor, env.as_mut(), episodes));
+            .and_then(|()| evaluate(&mut actor, env.as_mut(), episodes, mode));
         match result {
             Ok(e) => {
-                tracing::info!(epoch, learner_step, mean_return = e.mean_return, "evaluation");
+                let (mean_return, std_return, mode_name) = (e.mean_return, e.std_return, mode.name());
+                tracing::info!(
+                    epoch,
+                    learner_step,
+                    episodes,
+                    mode = mode_name,
+                    mean_return,
+                    std_return,
+                    "evaluation"
+                );
                 let report = EvalReport {
                     epoch,
                     learner_step,
                     episodes,
                     mean_return: e.mean_return,
                     mean_length: e.mean_length,
+                    std_return: e.std_return,
+                    mode,
                 };
                 if out.blocking_send(Out::Eval(report)).is_err() {
                     return;

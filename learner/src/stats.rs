@@ -19,6 +19,8 @@ pub(crate) fn report(
     r.push_metric("learner/weights_version", p.weights_version as f64);
     r.push_metric("learner/evals_skipped", p.evals_skipped as f64);
     r.push_metric("learner/non_finite_updates", p.non_finite_updates as f64);
+    // 1: the fused learner runs the updates; 0: candle (the log says why at start).
+    r.push_metric("learner/backend_fused", if p.fused { 1.0 } else { 0.0 });
     if p.means.n > 0 {
         r.push_metric("learner/q_loss", p.means.q_loss);
         r.push_metric("learner/v_loss", p.means.v_loss);

@@ -34,6 +34,8 @@ pub struct Progress {
     pub evals_skipped: u64,
     /// Updates with a non-finite loss.
     pub non_finite_updates: u64,
+    /// Whether the fused learner runs the updates (else the candle learner).
+    pub fused: bool,
 }
 
 /// Sums of per-update diagnostics, turned into means.
@@ -220,7 +222,7 @@ impl Updater {
             }
             if step.is_multiple_of(s.epoch_length_updates) {
                 let epoch = step / s.epoch_length_updates;
-                if let Some(eval) = &self.eval {
+                if let Some(eval) = self.eval.as_ref().filter(|_| epoch.is_multiple_of(s.eval_every_epochs)) {
                     match eval.try_send((epoch, self.learner.snapshot()?)) {
                         Ok(()) => {}
                         Err(TrySendError::Full(_)) => evals_skipped += 1,
@@ -242,6 +244,7 @@ impl Updater {
                     weights_version,
                     evals_skipped,
                     non_finite_updates: report.non_finite_updates,
+                    fused: self.learner.backend() == agent::Backend::Fused,
                 };
                 self.send(Out::Progress(Box::new(progress)));
                 (window_start, window_step, window_wait) = (Instant::now(), step, Duration::ZERO);

@@ -111,7 +111,31 @@ impl Message for BarrierReport {
     }
 }
 
-/// A learner evaluation on `eval`: the paper's deterministic episode(s) after an epoch.
+/// How an evaluation picks the policy's latent.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EvalMode {
+    /// The paper's: one h ~ N(0, I) drawn per evaluation and held for all its episodes.
+    #[default]
+    FixedLatent,
+    /// h = 0 for every step: the counterpart of a Gaussian policy's mean action.
+    ZeroLatent,
+    /// A fresh z ~ N(0, I) every step: the policy that collects the data.
+    Stochastic,
+}
+
+impl EvalMode {
+    /// The run-file spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::FixedLatent => "fixed_latent",
+            Self::ZeroLatent => "zero_latent",
+            Self::Stochastic => "stochastic",
+        }
+    }
+}
+
+/// A learner evaluation on `eval`: N episodes after an epoch, in one [`EvalMode`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct EvalReport {
     /// The epoch just finished (learner steps / epoch length).
@@ -124,6 +148,10 @@ pub struct EvalReport {
     pub mean_return: f64,
     /// Mean episode length.
     pub mean_length: f64,
+    /// Standard deviation of the episodes' returns (0 for one episode); finite.
+    pub std_return: f64,
+    /// How the latent was chosen.
+    pub mode: EvalMode,
 }
 
 impl Sealed for EvalReport {}
@@ -134,6 +162,7 @@ impl Message for EvalReport {
     fn validate(&self) -> Result<(), ValidationError> {
         check::positive("episodes", u64::from(self.episodes))?;
         check::finite_f64("mean_return", self.mean_return)?;
+        check::finite_f64("std_return", self.std_return)?;
         check::finite_f64("mean_length", self.mean_length)
     }
 }

@@ -66,7 +66,7 @@ pub mod topics;
 
 pub use check::{MAX_BATCH_LEN, MAX_DIM, MAX_NAME_LEN, MAX_STATS_ENTRIES, MAX_TEXT_LEN};
 pub use codec::{FORMAT_VERSION, Message, MessageKind, decode, encode, peek_kind};
-pub use control::{BarrierReport, EvalReport, GlobalStep, LearnerStep};
+pub use control::{BarrierReport, EvalMode, EvalReport, GlobalStep, LearnerStep};
 pub use error::{DecodeError, Result, TopicError, ValidationError};
 pub use experience::{ExperienceBatch, Transition, Transitions};
 pub use params::WeightsSnapshot;

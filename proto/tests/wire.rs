@@ -228,8 +228,15 @@ fn control_messages() {
     };
     check_message(&step, 1);
     check_message(&LearnerStep { learner_step: 10, weights_version: 8, starved: false }, 1);
-    let eval =
-        EvalReport { epoch: 3, learner_step: 3000, episodes: 1, mean_return: 812.5, mean_length: 1000.0 };
+    let eval = EvalReport {
+        epoch: 3,
+        learner_step: 3000,
+        episodes: 1,
+        mean_return: 812.5,
+        mean_length: 1000.0,
+        std_return: 0.0,
+        mode: proto::EvalMode::ZeroLatent,
+    };
     check_message(&eval, 1);
     assert!(EvalReport { mean_return: f64::NAN, ..eval }.validate().is_err());
     let barrier = BarrierReport {

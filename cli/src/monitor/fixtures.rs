@@ -99,6 +99,8 @@ pub fn eval(epoch: u64, mean_return: f64) -> Vec<u8> {
         episodes: 1,
         mean_return,
         mean_length: 1000.0,
+        std_return: 0.0,
+        mode: proto::EvalMode::FixedLatent,
     })
 }
 

@@ -83,7 +83,9 @@ impl EvalRecord {
             .with("learner_step", e.learner_step)
             .with("episodes", e.episodes)
             .with("mean_return", e.mean_return)
+            .with("std_return", e.std_return)
             .with("mean_length", e.mean_length)
+            .with("mode", e.mode.name())
             .with("env_steps_total", self.env_steps_total)
             .to_string()
     }

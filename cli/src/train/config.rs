@@ -21,8 +21,11 @@ pub struct TrainConfig {
     pub min_replay_size: u64,
     /// Updates per env step once training has started. Default 1 (`n_train_repeat`).
     pub updates_per_step: u32,
-    /// Evaluation episodes (deterministic mode) after each epoch. Default 1, as in the paper.
+    /// Evaluation episodes after each epoch. Default 1, as in the paper.
     pub eval_episodes: u32,
+    /// How the evaluation picks the latent (`fixed_latent`, the paper's and the default;
+    /// `zero_latent`; `stochastic`).
+    pub eval_mode: proto::EvalMode,
     /// Write a learner checkpoint every this many epochs (0: only at the end). Default 100.
     pub checkpoint_every_epochs: u64,
     /// Copy the learner's weights to the acting policy every this many env steps. Default 1 (the
@@ -43,6 +46,7 @@ impl Default for TrainConfig {
             min_replay_size: 1000,
             updates_per_step: 1,
             eval_episodes: 1,
+            eval_mode: proto::EvalMode::FixedLatent,
             checkpoint_every_epochs: 100,
             sync_actor_every_steps: 1,
             backend: Backend::Auto,

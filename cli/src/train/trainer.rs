@@ -192,7 +192,7 @@ impl Trainer {
     /// current weights: the distributed learner's evaluation, the same function.
     pub fn evaluate(&mut self, episodes: u32) -> Result<Evaluation> {
         self.actor.load(&self.learner.snapshot()?)?;
-        learner::evaluate(&mut self.actor, self.eval_env.as_mut(), episodes)
+        learner::evaluate(&mut self.actor, self.eval_env.as_mut(), episodes, self.config.train.eval_mode)
     }
 }
 
@@ -204,6 +204,8 @@ fn mean(values: &[f64]) -> f64 {
 mod tests {
     use agent::{AgentConfig, Learner};
     use replay::{ReplayConfig, SamplingMode};
+
+    use std::path::Path;
 
     use super::*;
     use crate::train::TrainConfig;
@@ -263,5 +265,29 @@ mod tests {
         let mut config = tiny(SamplingMode::Uniform);
         config.train.min_replay_size = 5000;
         assert!(config.fitted().unwrap_err().to_string().contains("never start"));
+    }
+
+    /// The pendulum run file (the ant-v5 default's options: reparameterised gradient, twin Q,
+    /// learned temperature, uniform prior) on the fused learner learns to balance: evaluation
+    /// return 1000 (the maximum) within its 20 epochs. About two minutes in a release build:
+    /// `cargo test --release -p sac-lsp-cli -- --ignored pendulum`.
+    #[test]
+    #[ignore = "a learning run of ~2 minutes; run with --ignored"]
+    fn the_pendulum_run_file_learns_to_balance_on_the_fused_learner() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/configs/inverted-pendulum.toml");
+        let config = RunConfig::load(Some(&path)).unwrap();
+        let a = &config.agent;
+        assert!(a.reparameterize && a.twin_q && a.learn_temperature, "the default options: {a:?}");
+        let mut trainer = Trainer::new(config.clone()).unwrap();
+        assert_eq!(trainer.learner().backend(), agent::Backend::Fused);
+        let mut best = f64::MIN;
+        for _ in 0..config.train.epochs {
+            let record = trainer.run_epoch().unwrap();
+            best = best.max(record.eval_return);
+            if record.eval_return >= 1000.0 {
+                return;
+            }
+        }
+        panic!("no evaluation reached 1000 in {} epochs (best {best})", config.train.epochs);
     }
 }

@@ -199,6 +199,7 @@ fn episode_and_eval_lines() {
     assert_eq!(line.get("learner_step").and_then(Value::as_u64), Some(5000));
     assert_eq!(line.get("mean_return").and_then(Value::as_f64), Some(1234.5));
     assert_eq!(line.get("mean_length").and_then(Value::as_f64), Some(1000.0));
+    assert_eq!(line.get("mode").and_then(Value::as_str), Some("fixed_latent"));
     assert_eq!(line.get("env_steps_total").and_then(Value::as_u64), Some(6700));
     assert_eq!(s.last_eval().map(|e| e.epoch), Some(5));
 }
