@@ -405,24 +405,37 @@ mod tests {
         }
     }
 
-    #[test]
-    fn steps_exactly_to_the_allowance_then_waits_for_the_learner() {
+    /// A worker on the pendulum with tiny networks, running on its own thread.
+    struct Running {
+        cfg: AgentConfig,
+        inbox: Arc<Inbox>,
+        rx: mpsc::Receiver<Out>,
+        worker: std::thread::JoinHandle<anyhow::Result<WorkerReport>>,
+    }
+
+    fn start() -> Running {
         let env = Task::InvertedPendulum.make(1).unwrap();
         let cfg = AgentConfig {
             critic_hidden: vec![8],
             embedding_layers: vec![8, 2],
             ..AgentConfig::for_task(env.spec().obs_dim, env.spec().act_dim)
         };
-        let weights = Learner::new(cfg.clone(), 1).unwrap().snapshot().unwrap();
-        let rollout = Rollout::new(0, env, Actor::new(cfg, 2).unwrap(), 1);
+        let rollout = Rollout::new(0, env, Actor::new(cfg.clone(), 2).unwrap(), 1);
         let inbox = Arc::new(Inbox::default());
-        let (tx, mut rx) = mpsc::channel(1024);
+        let (tx, rx) = mpsc::channel(1024);
         let settings =
             ExecutorSettings { batch_transitions: 4, report_interval_ms: 10, ..ExecutorSettings::default() };
         let worker = {
             let inbox = inbox.clone();
             std::thread::spawn(move || run(0, rollout, inbox, tx, settings))
         };
+        Running { cfg, inbox, rx, worker }
+    }
+
+    #[test]
+    fn steps_exactly_to_the_allowance_then_waits_for_the_learner() {
+        let Running { cfg, inbox, mut rx, worker } = start();
+        let weights = Learner::new(cfg, 1).unwrap().snapshot().unwrap();
         // No step, no weights: it waits without stepping.
         let (first, _) = until(&mut rx, |r| r.blocked);
         assert_eq!(first.env_steps, 0);
@@ -447,27 +460,13 @@ mod tests {
 
     #[test]
     fn unloadable_weights_are_counted_and_acting_goes_on_with_the_old_ones() {
-        let env = Task::InvertedPendulum.make(1).unwrap();
-        let cfg = AgentConfig {
-            critic_hidden: vec![8],
-            embedding_layers: vec![8, 2],
-            ..AgentConfig::for_task(env.spec().obs_dim, env.spec().act_dim)
-        };
+        let Running { cfg, inbox, mut rx, worker } = start();
         let weights =
             agent::ParamSnapshot { version: 3, ..Learner::new(cfg.clone(), 1).unwrap().snapshot().unwrap() };
-        let wrong_shapes = AgentConfig { critic_hidden: vec![5], ..cfg.clone() };
+        let wrong_shapes = AgentConfig { critic_hidden: vec![5], ..cfg };
         let wrong_shapes =
             agent::ParamSnapshot { version: 7, ..Learner::new(wrong_shapes, 1).unwrap().snapshot().unwrap() };
         let corrupt = agent::ParamSnapshot { version: 5, safetensors: vec![0xff; 64] };
-        let rollout = Rollout::new(0, env, Actor::new(cfg, 2).unwrap(), 1);
-        let inbox = Arc::new(Inbox::default());
-        let (tx, mut rx) = mpsc::channel(1024);
-        let settings =
-            ExecutorSettings { batch_transitions: 4, report_interval_ms: 10, ..ExecutorSettings::default() };
-        let worker = {
-            let inbox = inbox.clone();
-            std::thread::spawn(move || run(0, rollout, inbox, tx, settings))
-        };
         inbox.set_step(step(10, 5));
         inbox.set_weights(weights);
         until(&mut rx, |r| r.blocked && r.env_steps == 5);
