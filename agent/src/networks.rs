@@ -46,14 +46,6 @@ impl<M> Net<M> {
     pub fn import(&self, tensors: &HashMap<String, Tensor>) -> Result<()> {
         import(self.role, &self.vars, tensors)
     }
-
-    pub fn check(&self, tensors: &HashMap<String, Tensor>) -> Result<()> {
-        check(self.role, &self.vars, tensors)
-    }
-
-    fn set_checked(&self, tensors: &HashMap<String, Tensor>) -> Result<()> {
-        set_checked(self.role, &self.vars, tensors)
-    }
 }
 
 /// Builds a policy alone (a frozen stack level), initialised from `init`.
@@ -87,30 +79,25 @@ impl Networks {
         Ok(Self { policy, qs, v, v_target })
     }
 
+    /// Every network's role and variables, in the order policy, Q1, (Q2), V, V-bar.
+    fn var_maps(&self) -> Vec<(&'static str, &VarMap)> {
+        let mut maps = vec![(self.policy.role, &self.policy.vars)];
+        maps.extend(self.qs.iter().map(|q| (q.role, &q.vars)));
+        maps.push((self.v.role, &self.v.vars));
+        maps.push((self.v_target.role, &self.v_target.vars));
+        maps
+    }
+
     /// Every network's tensors under `{role}.{name}`.
     pub fn export(&self, out: &mut Vec<(String, Tensor)>) -> Result<()> {
-        self.policy.export(out)?;
-        for q in &self.qs {
-            q.export(out)?;
-        }
-        self.v.export(out)?;
-        self.v_target.export(out)
+        self.var_maps().into_iter().try_for_each(|(role, vars)| export(role, vars, out))
     }
 
     /// Sets every network from `tensors`; all names must be present with their shapes and finite
     /// values, else no network changes (a bad snapshot leaves an actor acting as before).
     pub fn import(&self, tensors: &HashMap<String, Tensor>) -> Result<()> {
-        self.policy.check(tensors)?;
-        for q in &self.qs {
-            q.check(tensors)?;
-        }
-        self.v.check(tensors)?;
-        self.v_target.check(tensors)?;
-        self.policy.set_checked(tensors)?;
-        for q in &self.qs {
-            q.set_checked(tensors)?;
-        }
-        self.v.set_checked(tensors)?;
-        self.v_target.set_checked(tensors)
+        let maps = self.var_maps();
+        maps.iter().try_for_each(|(role, vars)| check(role, vars, tensors))?;
+        maps.iter().try_for_each(|(role, vars)| set_checked(role, vars, tensors))
     }
 }

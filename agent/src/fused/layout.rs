@@ -155,6 +155,8 @@ pub(crate) struct Layout {
     pub log_alpha: Option<usize>,
     /// V-bar's arrays with their V counterparts; every target lies after its online array.
     pub polyak: Vec<PolyakPair>,
+    /// The roles that own arrays, so [`Layout::has`] needs no scan on the update's path.
+    roles: Vec<Role>,
 }
 
 struct Builder {
@@ -267,6 +269,7 @@ impl Layout {
                 Some(PolyakPair { online: o.offset, target: t.offset, len: t.len })
             })
             .collect();
+        let roles = Role::ALL.into_iter().filter(|r| b.arrays.iter().any(|a| a.role == *r)).collect();
         Self {
             arrays: b.arrays,
             len: b.len,
@@ -278,12 +281,13 @@ impl Layout {
             couplings,
             log_alpha,
             polyak,
+            roles,
         }
     }
 
     /// Whether any array belongs to `role` (Q2 and the temperature are optional).
     pub(crate) fn has(&self, role: Role) -> bool {
-        self.arrays.iter().any(|a| a.role == role)
+        self.roles.contains(&role)
     }
 
     /// Copies `tensors[{prefix}.{name}]` into `dst` for every array of the roles in `roles`; all
