@@ -72,8 +72,7 @@ impl State {
             }
         };
         // Repeats and old versions are refused by the store before their bodies are read.
-        let newer = self.store.latest().is_none_or(|held| snapshot.version > held.version);
-        if newer {
+        if self.store.takes(snapshot.version) {
             match check_body(&snapshot.safetensors, self.schema.as_ref()) {
                 Ok(schema) => self.schema = Some(schema),
                 Err(BadBody { reason, detail }) => {

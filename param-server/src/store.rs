@@ -39,10 +39,15 @@ pub struct ParamStore {
 }
 
 impl ParamStore {
+    /// Whether a snapshot of `version` would become the latest (nothing held, or newer).
+    pub fn takes(&self, version: u64) -> bool {
+        self.latest.as_ref().is_none_or(|held| version > held.version)
+    }
+
     /// Takes `snapshot` if it is newer than the one held; refusals are counted either way.
     pub fn offer(&mut self, snapshot: WeightsSnapshot) -> Result<u64, Rejected> {
-        if let Some(held) = &self.latest
-            && snapshot.version <= held.version
+        if !self.takes(snapshot.version)
+            && let Some(held) = &self.latest
         {
             self.rejected += 1;
             if snapshot.version == held.version {
