@@ -23,6 +23,10 @@ pub struct ParamServerConfig {
     pub announce_interval_ms: u64,
     /// How often the role publishes its stats, in milliseconds. Default 1000.
     pub stats_interval_ms: u64,
+    /// Most learner steps per second the global step may move by; a step further ahead is refused
+    /// and counted (`param/rejected.learner_step/implausible_step`), so a forged frame cannot pin
+    /// the barrier. Default 100 000, ~50x what the fused learner makes here.
+    pub max_learner_steps_per_s: u64,
 }
 
 impl Default for ParamServerConfig {
@@ -33,6 +37,7 @@ impl Default for ParamServerConfig {
             max_weight_lag: None,
             announce_interval_ms: 200,
             stats_interval_ms: 1000,
+            max_learner_steps_per_s: crate::step_guard::DEFAULT_MAX_LEARNER_STEPS_PER_S,
         }
     }
 }
@@ -57,6 +62,7 @@ impl node::RoleConfig for ParamServerConfig {
             ("warm_up_transitions", self.warm_up_transitions),
             ("announce_interval_ms", self.announce_interval_ms),
             ("stats_interval_ms", self.stats_interval_ms),
+            ("max_learner_steps_per_s", self.max_learner_steps_per_s),
         ];
         if let Some(key) = node::config::first_zero(&positive) {
             return Err(format!("{key} must be > 0"));

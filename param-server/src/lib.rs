@@ -22,6 +22,7 @@
 //! | `store.rs`      | [`ParamStore`]: the latest weights, versions only move forward        |
 //! | `starvation.rs` | [`StarvationWatch`]: when a starved learner and full barrier deadlock |
 //! | `state.rs`      | [`State`]: barrier + store + counters, messages in, announcements out |
+//! | `step_guard.rs` | [`StepGuard`]: refuses learner steps that jump implausibly far        |
 //! | `config.rs`     | [`ParamServerConfig`] (`[param_server]`)                              |
 //!
 //! Executors fetch weights only when an announcement names a newer version than theirs, so a
@@ -33,6 +34,7 @@ mod body;
 mod config;
 mod starvation;
 mod state;
+mod step_guard;
 mod store;
 
 use std::time::{Duration, Instant};
@@ -44,6 +46,7 @@ use node::{Bus, Shutdown};
 use proto::{Role, Topic, topics};
 pub use starvation::{REFILL_AFTER, StarvationWatch};
 pub use state::{State, StateCounts};
+pub use step_guard::{DEFAULT_MAX_LEARNER_STEPS_PER_S, Implausible, StepGuard};
 pub use store::{ParamStore, Rejected, StoreCounts};
 use zenoh::sample::SampleKind;
 
@@ -84,7 +87,7 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
     let _alive = bus.announce().await?;
     tracing::info!(rule = ?config.rule(), "param-server up");
 
-    let mut state = State::new(config.rule());
+    let mut state = State::new(config.rule()).with_step_guard(StepGuard::new(config.max_learner_steps_per_s));
     let mut latest: Option<zenoh::bytes::ZBytes> = None;
     let mut announce = tokio::time::interval(Duration::from_millis(config.announce_interval_ms));
     let mut stats = tokio::time::interval(Duration::from_millis(config.stats_interval_ms));

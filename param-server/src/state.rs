@@ -6,6 +6,7 @@ use node::Rejects;
 use proto::{BarrierReport, BlockedReason, GlobalStep, LearnerStep, NodeId, StatsReport, WeightsSnapshot};
 
 use crate::starvation::StarvationWatch;
+use crate::step_guard::{Implausible, StepGuard};
 use crate::{BadBody, Barrier, BarrierRule, ParamStore, Rejected, Schema, check_body};
 
 /// What the param server has done.
@@ -46,6 +47,8 @@ pub struct State {
     starvation: StarvationWatch,
     /// The tensor names and shapes of the weights taken first; every later body must match.
     schema: Option<Schema>,
+    /// Refuses learner steps that move implausibly far (a forged frame would pin the barrier).
+    step_guard: StepGuard,
 }
 
 impl State {
@@ -59,7 +62,29 @@ impl State {
             learner_moved_at: Instant::now(),
             starvation: StarvationWatch::default(),
             schema: None,
+            step_guard: StepGuard::default(),
         }
+    }
+
+    /// The same state with learner steps bounded by `guard` instead of the default.
+    pub fn with_step_guard(self, guard: StepGuard) -> Self {
+        Self { step_guard: guard, ..self }
+    }
+
+    /// Takes the learner's `step` (from `what`) into the barrier unless it moves implausibly far;
+    /// returns whether the global step moved.
+    fn learner_reached(&mut self, step: u64, what: &str) -> bool {
+        let now = Instant::now();
+        if let Err(Implausible { step, held, allowance }) = self.step_guard.check(step, now) {
+            let detail = format!("step {step} from {what} is more than {allowance} past {held}");
+            self.rejects.record(&format!("{what}/implausible_step"), &detail, now);
+            return false;
+        }
+        let moved = self.barrier.learner_step(step);
+        if moved {
+            self.learner_moved_at = now;
+        }
+        moved
     }
 
     /// A frame from `params/publish`. Returns whether it became the latest weights.
@@ -87,9 +112,7 @@ impl State {
             Ok(version) => {
                 self.counts.snapshots_accepted += 1;
                 self.barrier.published(version);
-                if self.barrier.learner_step(learner_step) {
-                    self.learner_moved_at = Instant::now();
-                }
+                self.learner_reached(learner_step, "weights");
                 true
             }
             Err(Rejected::Repeated { .. }) => {
@@ -110,10 +133,7 @@ impl State {
             Ok(step) => {
                 self.counts.learner_steps += 1;
                 self.starvation.learner(step.starved, Instant::now());
-                let moved = self.barrier.learner_step(step.learner_step);
-                if moved {
-                    self.learner_moved_at = Instant::now();
-                }
+                let moved = self.learner_reached(step.learner_step, "learner_step");
                 moved | self.break_starvation()
             }
             Err(error) => {
@@ -335,6 +355,20 @@ mod tests {
         assert_eq!(s.announcement().learner_step, 60);
         assert_eq!(s.rejects().counts()["weights/not_newer"], 1, "the repeat is not bad input");
         assert_eq!(s.counts().snapshots_repeated, 1);
+    }
+
+    #[test]
+    fn a_forged_learner_step_of_2_to_the_62_does_not_pin_the_global_step() {
+        let mut s = State::new(rule()).with_step_guard(StepGuard::new(1000));
+        let step =
+            |learner_step| proto::encode(&LearnerStep { learner_step, weights_version: 0, starved: false });
+        assert!(s.on_learner_step(&step(100)));
+        assert!(!s.on_learner_step(&step(1 << 62)), "refused");
+        assert_eq!(s.announcement().learner_step, 100);
+        assert_eq!(s.rejects().counts()["learner_step/implausible_step"], 1);
+        // The real learner's next steps still move it.
+        assert!(s.on_learner_step(&step(600)));
+        assert_eq!(s.announcement().learner_step, 600);
     }
 
     #[test]
