@@ -97,7 +97,7 @@ pub(crate) fn q_regression(nets: &Networks, cfg: &AgentConfig, batch: &BatchTens
         &batch.terminated,
         &next_value,
         cfg.scale_reward.into(),
-        cfg.discount.into(),
+        cfg.bootstrap_discount().into(),
     )?;
     let q_values = nets
         .qs

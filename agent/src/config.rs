@@ -18,6 +18,9 @@ pub enum ActionPrior {
     Uniform,
 }
 
+/// The longest n-step return allowed: past it the uncorrected return is mostly off-policy rewards.
+pub const MAX_N_STEP: usize = 20;
+
 /// Configuration of one SAC-LSP level: network shapes and the hyperparameters of its update.
 ///
 /// `obs_dim` and `act_dim` come from the task; everything else defaults to the paper's Ant values.
@@ -81,6 +84,13 @@ pub struct AgentConfig {
     pub initial_temperature: f32,
     /// Target entropy of the learned temperature; `None` means -act_dim. Default `None`.
     pub target_entropy: Option<f32>,
+    /// Option beyond the paper: n-step returns (Ape-X). Each stored transition carries the
+    /// discounted sum of n rewards and the observation n steps later (built by [`NStepReturns`]
+    /// where the env steps are taken), and the Q target bootstraps with discount^n
+    /// ([`AgentConfig::bootstrap_discount`]). Default 1, the paper's one-step target.
+    ///
+    /// [`NStepReturns`]: crate::NStepReturns
+    pub n_step: usize,
 }
 
 impl Default for AgentConfig {
@@ -108,6 +118,7 @@ impl Default for AgentConfig {
             learn_temperature: false,
             initial_temperature: 1.0,
             target_entropy: None,
+            n_step: 1,
         }
     }
 }
@@ -129,6 +140,12 @@ impl AgentConfig {
             scale_reward: 3.0,
             ..self.clone()
         }
+    }
+
+    /// The discount of the Q target's bootstrap V̄(s'): discount^n_step, since a stored transition
+    /// spans n_step env steps.
+    pub fn bootstrap_discount(&self) -> f32 {
+        self.discount.powi(self.n_step as i32)
     }
 
     /// The target entropy actually used by the learned temperature.
@@ -185,6 +202,9 @@ impl AgentConfig {
         if self.batch_size == 0 {
             return fail("batch_size must be at least 1".into());
         }
+        if !(1..=MAX_N_STEP).contains(&self.n_step) {
+            return fail(format!("n_step must be in [1, {MAX_N_STEP}], got {}", self.n_step));
+        }
         if let Some(h) = self.target_entropy
             && !h.is_finite()
         {
@@ -212,6 +232,14 @@ mod tests {
     }
 
     #[test]
+    fn the_bootstrap_discount_spans_n_steps() {
+        let one = AgentConfig::default();
+        assert_eq!(one.bootstrap_discount(), 0.99);
+        let three = AgentConfig { n_step: 3, ..Default::default() };
+        assert!((three.bootstrap_discount() - 0.99f32.powi(3)).abs() < 1e-7);
+    }
+
+    #[test]
     fn validate_names_the_bad_field() {
         let cases: Vec<(AgentConfig, &str)> = vec![
             (AgentConfig { act_dim: 0, ..Default::default() }, "act_dim"),
@@ -224,6 +252,8 @@ mod tests {
             (AgentConfig { scale_reward: f32::NAN, ..Default::default() }, "scale_reward"),
             (AgentConfig { adam_beta2: 1.0, ..Default::default() }, "adam_beta2"),
             (AgentConfig { batch_size: 0, ..Default::default() }, "batch_size"),
+            (AgentConfig { n_step: 0, ..Default::default() }, "n_step"),
+            (AgentConfig { n_step: 21, ..Default::default() }, "n_step"),
             (AgentConfig { target_entropy: Some(f32::INFINITY), ..Default::default() }, "target_entropy"),
         ];
         for (cfg, field) in cases {

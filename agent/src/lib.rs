@@ -16,6 +16,7 @@
 //! | `optim.rs` | [`Adam`] with TensorFlow's epsilon placement and named moments |
 //! | `target.rs` | [`polyak_update`] between two `VarMap`s |
 //! | `batch.rs` | [`Batch`] of transitions (with optional IS weights) |
+//! | `nstep.rs` | [`NStepReturns`]: n-step transitions from a stream of env steps |
 //! | `learning.rs` | [`Learner`]: `update(&Batch) -> UpdateOutput { metrics, td_errors }`, snapshots, checkpoints |
 //! | `acting.rs` | [`Actor`]: `act(obs, Mode)`, `load(&ParamSnapshot)`, `td_errors(&Batch)` |
 //! | `stack.rs` | [`PolicyStack`]: frozen lower levels of a hierarchy |
@@ -65,6 +66,7 @@ mod learning;
 mod losses;
 mod mlp;
 mod networks;
+mod nstep;
 mod optim;
 mod params;
 mod policy;
@@ -89,6 +91,7 @@ pub use losses::{
     v_loss, v_target,
 };
 pub use mlp::{Activation, BiasInit, Dense, Grad, Mlp, MlpSpec, xavier_limit};
+pub use nstep::{NStepReturns, NStepTransition, StepEnd};
 pub use optim::{Adam, AdamConfig};
 pub use params::{Checkpoint, ParamSnapshot};
 pub use policy::{BijectorOutput, LatentPolicy, PolicySample};

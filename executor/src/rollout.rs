@@ -1,9 +1,10 @@
 //! The rollout, sans-IO: one environment, the acting policy and critics, and the transitions not
 //! yet published. [`Rollout::step`] is one env step with the stochastic policy; [`Rollout::flush`]
 //! turns the pending transitions into an [`ExperienceBatch`] with each transition's initial
-//! priority |δ| from the local critics (Ape-X; the same formula the learner's updates use).
+//! priority |δ| from the local critics (Ape-X; the same formula the learner's updates use). With
+//! `[agent] n_step` > 1 the stored transitions are n-step ones ([`NStepReturns`]).
 
-use agent::{Actor, Batch, Mode, ParamSnapshot};
+use agent::{Actor, Batch, Mode, NStepReturns, ParamSnapshot, StepEnd};
 use proto::{EpisodeReport, ExperienceBatch, Transition, Transitions};
 use sim::Environment;
 
@@ -14,6 +15,10 @@ pub struct StepOutcome {
     pub episode: Option<EpisodeReport>,
     /// The step produced a non-finite observation or reward: it was dropped and the episode reset.
     pub dropped_non_finite: bool,
+    /// Steps of this episode that no n-step transition will start from: the last n − 1 before a
+    /// time-limit truncation, or the open ones when a non-finite step reset the episode. Always 0
+    /// with n = 1 (except the non-finite step itself, counted by `dropped_non_finite`).
+    pub dropped_n_step_tail: usize,
 }
 
 /// An executor's environment and policy.
@@ -23,6 +28,7 @@ pub struct Rollout {
     actor: Actor,
     observation: Vec<f32>,
     pending: Transitions,
+    n_step: NStepReturns,
     episode: u64,
     episode_return: f64,
     episode_length: u32,
@@ -51,12 +57,14 @@ impl Rollout {
         let spec = env.spec().clone();
         let observation = to_f32(&env.reset(Some(reset_seed)));
         let pending = Transitions::with_capacity(spec.obs_dim as u32, spec.act_dim as u32, 64);
+        let n_step = NStepReturns::new(actor.config().n_step, actor.config().discount);
         Self {
             executor_id,
             env,
             actor,
             observation,
             pending,
+            n_step,
             episode: 0,
             episode_return: 0.0,
             episode_length: 0,
@@ -95,8 +103,9 @@ impl Rollout {
         self.actor.load(snapshot)
     }
 
-    /// One env step with the stochastic policy. The transition joins the pending batch unless its
-    /// numbers are not finite (then the episode is reset and the step reported as dropped).
+    /// One env step with the stochastic policy. The transition (the n-step ones it completes) joins
+    /// the pending batch unless its numbers are not finite (then the episode is reset and the step
+    /// reported as dropped).
     pub fn step(&mut self) -> anyhow::Result<StepOutcome> {
         let act = self.actor.act(&self.observation, Mode::Explore)?;
         let action = self.env.spec().action_from_unit(&act.env_action);
@@ -107,20 +116,29 @@ impl Rollout {
         let finite = reward.is_finite() && next_observation.iter().all(|v| v.is_finite());
         if !finite {
             // MuJoCo blew up; a NaN in one transition would make the replay server reject the batch.
+            let dropped_n_step_tail = self.n_step.clear();
             self.reset_episode();
-            return Ok(StepOutcome { episode: None, dropped_non_finite: true });
+            return Ok(StepOutcome { episode: None, dropped_non_finite: true, dropped_n_step_tail });
         }
-        self.pending.push(Transition {
-            observation: &self.observation,
-            action: &act.action,
-            reward,
-            next_observation: &next_observation,
-            // Only a true termination stops bootstrapping; the time limit does not.
-            terminated: step.terminated,
-        })?;
         self.episode_return += step.reward;
         self.episode_length += 1;
         let truncated = step.truncated || self.episode_length >= self.episode_limit;
+        // Only a true termination stops bootstrapping; the time limit does not.
+        let end = StepEnd { terminated: step.terminated, truncated };
+        let (pending, mut stored) = (&mut self.pending, Ok(()));
+        let dropped_n_step_tail =
+            self.n_step.push(&self.observation, &act.action, reward, &next_observation, end, |t| {
+                if stored.is_ok() {
+                    stored = pending.push(Transition {
+                        observation: t.observation,
+                        action: t.action,
+                        reward: t.reward,
+                        next_observation: t.next_observation,
+                        terminated: t.terminated,
+                    });
+                }
+            });
+        stored?;
         if step.terminated || truncated {
             let report = EpisodeReport {
                 executor_id: self.executor_id,
@@ -132,10 +150,10 @@ impl Rollout {
                 weights_version: self.actor.version().unwrap_or(0),
             };
             self.reset_episode();
-            Ok(StepOutcome { episode: Some(report), dropped_non_finite: false })
+            Ok(StepOutcome { episode: Some(report), dropped_non_finite: false, dropped_n_step_tail })
         } else {
             self.observation = next_observation;
-            Ok(StepOutcome { episode: None, dropped_non_finite: false })
+            Ok(StepOutcome { episode: None, dropped_non_finite: false, dropped_n_step_tail })
         }
     }
 
@@ -189,10 +207,15 @@ mod tests {
     use super::*;
 
     fn rollout() -> (Rollout, Learner) {
+        rollout_with(1)
+    }
+
+    fn rollout_with(n_step: usize) -> (Rollout, Learner) {
         let env = Task::InvertedPendulum.make(3).unwrap();
         let cfg = AgentConfig {
             critic_hidden: vec![8],
             embedding_layers: vec![8, 2],
+            n_step,
             ..AgentConfig::for_task(env.spec().obs_dim, env.spec().act_dim)
         };
         let learner = Learner::new(cfg.clone(), 1).unwrap();
@@ -237,5 +260,28 @@ mod tests {
         assert!(r.flush().unwrap().is_none(), "nothing pending after a flush");
         r.step().unwrap();
         assert_eq!(r.flush().unwrap().unwrap().seq, 1);
+    }
+
+    #[test]
+    fn n_step_transitions_carry_discounted_sums_and_every_step_is_accounted_for() {
+        let (r, _) = rollout_with(3);
+        let mut r = r.with_episode_limit(Some(20));
+        let (mut dropped, mut truncated) = (0, 0);
+        for _ in 0..300 {
+            let outcome = r.step().unwrap();
+            assert!(!outcome.dropped_non_finite);
+            dropped += outcome.dropped_n_step_tail;
+            truncated += usize::from(outcome.episode.is_some_and(|e| !e.terminated));
+        }
+        let batch = r.flush().unwrap().unwrap();
+        assert_eq!(batch.validate(), Ok(()));
+        // Each truncated episode leaves its last two steps out; the open ones are still pending.
+        assert_eq!(dropped, 2 * truncated);
+        assert_eq!(batch.len() + dropped + r.n_step.open(), 300);
+        // The pendulum pays 1 per step alive: a full 3-step transition carries 1 + γ + γ².
+        let full = 1.0 + 0.99 + 0.99f32 * 0.99;
+        let (t, rewards) = (&batch.transitions.terminated, &batch.transitions.rewards);
+        assert!(t.iter().zip(rewards).filter(|(d, _)| !**d).all(|(_, r)| (r - full).abs() < 1e-5));
+        assert!(t.iter().zip(rewards).filter(|(d, _)| **d).all(|(_, r)| *r <= full + 1e-5));
     }
 }

@@ -20,6 +20,7 @@ pub(crate) fn report(node: NodeId, progress: &Progress, rejects: &Rejects) -> St
     r.push_metric("executor/weights_unloadable", p.weights_unloadable as f64);
     r.push_metric("executor/batches", p.batches as f64);
     r.push_metric("executor/dropped_non_finite", p.dropped_non_finite as f64);
+    r.push_metric("executor/dropped_n_step_tail", p.dropped_n_step_tail as f64);
     r.push_metric("executor/blocked_ms_total", p.blocked_ms_total as f64);
     r.push_metric("executor/blocked", if p.waiting.is_some() { 1.0 } else { 0.0 });
     if let Some(version) = p.weights_version {

@@ -109,6 +109,8 @@ pub struct Progress {
     pub batches: u64,
     /// Non-finite steps dropped.
     pub dropped_non_finite: u64,
+    /// Steps that start no n-step transition (the tail before a truncation; `[agent] n_step` > 1).
+    pub dropped_n_step_tail: u64,
     /// Total time spent waiting, ms.
     pub blocked_ms_total: u64,
     /// What it waits on now, and since when.
@@ -144,6 +146,8 @@ pub struct WorkerReport {
     pub weights_unloadable: u64,
     /// Non-finite steps dropped.
     pub dropped_non_finite: u64,
+    /// Steps that start no n-step transition (the tail before a truncation; `[agent] n_step` > 1).
+    pub dropped_n_step_tail: u64,
     /// Total time waiting, ms.
     pub blocked_ms_total: u64,
     /// Largest `env_steps − allowance` seen after any step; never positive when the barrier holds.
@@ -312,6 +316,7 @@ impl Worker {
             self.report.dropped_non_finite += 1;
             tracing::warn!("non-finite observation or reward: transition dropped, episode reset");
         }
+        self.report.dropped_n_step_tail += outcome.dropped_n_step_tail as u64;
         if let Some(episode) = outcome.episode {
             self.report.episodes += 1;
             self.last_return = Some(episode.episode_return);
@@ -362,6 +367,7 @@ impl Worker {
             weights_unloadable: self.report.weights_unloadable,
             batches: self.report.batches,
             dropped_non_finite: self.report.dropped_non_finite,
+            dropped_n_step_tail: self.report.dropped_n_step_tail,
             blocked_ms_total: self.blocked_ms_total_now(),
             waiting: self.waiting,
         }

@@ -51,7 +51,7 @@ fn variants() -> Vec<AgentConfig> {
 
 /// The options beyond the paper, alone and together, on the shapes above: the reparameterised
 /// gradient (squashed, unsquashed with three couplings, 1-d), twin Q, the learned temperature,
-/// and all three with the uniform prior (the ant-v5 default).
+/// all three with the uniform prior (the ant-v5 default), and 3-step returns (bootstrap discount^3).
 fn option_variants() -> Vec<AgentConfig> {
     let all = |cfg: AgentConfig| AgentConfig {
         reparameterize: true,
@@ -73,6 +73,7 @@ fn option_variants() -> Vec<AgentConfig> {
         all(tiny()),
         all(AgentConfig { embedding_layers: vec![4], initial_temperature: 0.5, ..tiny() }),
         all(AgentConfig { act_dim: 1, ..tiny() }),
+        all(AgentConfig { n_step: 3, ..tiny() }),
     ]
 }
 

@@ -301,7 +301,7 @@ impl FusedLearner {
         let log_alpha = self.layout.log_alpha.map(|at| self.params[at]);
         let scalars = LossScalars {
             scale_reward: cfg.scale_reward,
-            discount: cfg.discount,
+            discount: cfg.bootstrap_discount(),
             alpha: log_alpha.map_or(cfg.initial_temperature.into(), |l| f64::from(l).exp()),
             normal_prior: cfg.action_prior == crate::config::ActionPrior::Normal,
             reparameterize: cfg.reparameterize,

@@ -5,7 +5,7 @@
 
 use std::time::Instant;
 
-use agent::{Actor, AnyLearner, Batch, Mode};
+use agent::{Actor, AnyLearner, Batch, Mode, NStepReturns, StepEnd};
 use anyhow::{Context, Result};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -25,6 +25,8 @@ pub struct Trainer {
     learner: AnyLearner,
     actor: Actor,
     replay: ReplayBuffer,
+    /// Builds the stored transitions (n-step ones with `[agent] n_step` > 1).
+    n_step: NStepReturns,
     rng: StdRng,
     observation: Vec<f32>,
     episode_return: f64,
@@ -60,6 +62,7 @@ impl Trainer {
         actor.load(&learner.snapshot()?)?;
         let replay = ReplayBuffer::new(config.replay.clone(), config.dims())?;
         let observation = to_f32(&env.reset(Some(seed + 2)));
+        let n_step = NStepReturns::new(config.agent.n_step, config.agent.discount);
         Ok(Self {
             config,
             env,
@@ -67,6 +70,7 @@ impl Trainer {
             learner,
             actor,
             replay,
+            n_step,
             rng: StdRng::seed_from_u64(seed + 4),
             observation,
             episode_return: 0.0,
@@ -135,17 +139,24 @@ impl Trainer {
         let step = self.env.step(&action)?;
         let next_observation = to_f32(&step.observation);
         let reward = step.reward as f32;
-        self.replay
-            .insert_batch(TransitionBatch {
-                observations: &self.observation,
-                actions: &act.action,
-                rewards: &[reward],
-                next_observations: &next_observation,
-                // Only a true termination stops bootstrapping; the time limit does not.
-                terminated: &[step.terminated],
-                abs_td_errors: None,
-            })
-            .context("storing a transition")?;
+        // Only a true termination stops bootstrapping; the time limit does not.
+        let end = StepEnd { terminated: step.terminated, truncated: step.truncated };
+        let (replay, mut stored) = (&mut self.replay, Ok(()));
+        self.n_step.push(&self.observation, &act.action, reward, &next_observation, end, |t| {
+            if stored.is_ok() {
+                stored = replay
+                    .insert_batch(TransitionBatch {
+                        observations: t.observation,
+                        actions: t.action,
+                        rewards: &[t.reward],
+                        next_observations: t.next_observation,
+                        terminated: &[t.terminated],
+                        abs_td_errors: None,
+                    })
+                    .map(drop);
+            }
+        });
+        stored.context("storing a transition")?;
         self.env_steps += 1;
         self.episode_return += step.reward;
         if step.terminated || step.truncated {
