@@ -14,6 +14,11 @@
 //! on two threads. No fused batch-1 forward exists: the action latency is the candle `Actor`'s,
 //! which executors use.
 //!
+//! With `UPDATE_BENCH_CHECKPOINT=<learner checkpoint of the default run file>` it also times the
+//! fused update from that trained state with subnormals flushed to zero (the learner's default)
+//! and without, and prints `trained checkpoint fused, flush: <N> updates/s, no flush: <M>
+//! updates/s, ratio <R>` (a trained learner's Adam moments hold thousands of subnormal values).
+//!
 //! FLOPs are counted from the layer shapes, 2 FLOP per multiply-add:
 //! * nominal (PyTorch-style, as `shared/reference/stack.md` counts): every layer evaluation the
 //!   candle update runs costs 2 per MAC forward, and each one on the differentiated path another
@@ -26,7 +31,7 @@ use std::time::Instant;
 
 use serde::Deserialize;
 
-use agent::{AgentConfig, Batch, FusedLearner, Learner, Mode};
+use agent::{AgentConfig, Batch, Checkpoint, FusedLearner, Learner, Mode};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use rand_distr::StandardNormal;
 
@@ -274,5 +279,44 @@ fn main() -> agent::Result<()> {
         println!("{line}");
     }
     println!("default ant-v5 fused / paper ant-v5 fused: ratio {:.2}", fused_median[1] / fused_median[0]);
+    if let Ok(path) = std::env::var("UPDATE_BENCH_CHECKPOINT") {
+        let default = &configs[1].1;
+        trained_checkpoint(&path, default, threads, (warmup, runs, per_window))?;
+    }
+    Ok(())
+}
+
+/// The fused update from a trained checkpoint, with and without flushing subnormals, interleaved.
+fn trained_checkpoint(
+    path: &str,
+    cfg: &AgentConfig,
+    threads: usize,
+    (warmup, runs, per_window): (usize, usize, usize),
+) -> agent::Result<()> {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    let checkpoint = Checkpoint { step: 0, safetensors: bytes };
+    let mut flush = FusedLearner::from_checkpoint(cfg.clone(), &checkpoint)?.with_threads(threads);
+    let mut plain = flush.clone().with_flush_denormals(false);
+    let b = batch(cfg, cfg.batch_size, &mut StdRng::seed_from_u64(3));
+    // Few warm-up updates: the subnormal moments decay to zero within a few hundred of them.
+    for _ in 0..warmup.min(5) {
+        flush.update(&b)?;
+        plain.update(&b)?;
+    }
+    let (mut rf, mut rp) = (Vec::new(), Vec::new());
+    for _ in 0..runs {
+        for (learner, rates) in [(&mut flush, &mut rf), (&mut plain, &mut rp)] {
+            rates.push(rate(1, per_window, threads == 1, || {
+                learner.update(&b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
+            }));
+        }
+    }
+    let (rf, rp) = (merge(&rf), merge(&rp));
+    println!(
+        "trained checkpoint fused, flush: {:.0} updates/s, no flush: {:.0} updates/s, ratio {:.2}",
+        rf.wall.1,
+        rp.wall.1,
+        rf.wall.1 / rp.wall.1
+    );
     Ok(())
 }
