@@ -135,7 +135,10 @@ def main():
         "stderr": float(r.std(ddof=1) / np.sqrt(len(r))) if len(r) > 1 else 0.0,
         "min": float(r.min()),
         "max": float(r.max()),
+        "median": float(np.median(r)),
         "mean_length": float(np.mean(lengths)),
+        "returns": [round(float(x), 1) for x in r],
+        "lengths": [int(n) for n in lengths],
     }
     print(json.dumps(summary))
     if args.json:
