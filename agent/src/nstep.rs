@@ -3,7 +3,7 @@
 //!
 //! The transition that starts at step t carries R = r_t + γ r_{t+1} + … + γ^{n-1} r_{t+n-1} and the
 //! observation n steps later, so the learner's target R + γ^n (1 − d) V̄(s_{t+n}) (the discount is
-//! [`AgentConfig::bootstrap_discount`](crate::AgentConfig::bootstrap_discount)) propagates reward n
+//! [`AgentConfig::bootstrap_discount`]) propagates reward n
 //! steps per update instead of one. The entropy terms of the n − 1 intermediate steps are left out,
 //! as in Ape-X and D4PG's uncorrected n-step returns.
 //!
@@ -13,6 +13,8 @@
 //! episode at n = 3). With n = 1 every step is emitted at once, unchanged.
 
 use std::collections::VecDeque;
+
+use crate::config::AgentConfig;
 
 /// One completed n-step transition, borrowed from the accumulator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -64,6 +66,12 @@ impl NStepReturns {
         Self { n, discount, open: VecDeque::with_capacity(n as usize), spare: Vec::new() }
     }
 
+    /// The accumulator whose transitions `cfg`'s Q target expects: `cfg.n_step` steps at
+    /// `cfg.discount` (the target then bootstraps with [`AgentConfig::bootstrap_discount`]).
+    pub fn for_config(cfg: &AgentConfig) -> Self {
+        Self::new(cfg.n_step, cfg.discount)
+    }
+
     /// Transitions begun but not yet complete.
     pub fn open(&self) -> usize {
         self.open.len()
@@ -71,16 +79,17 @@ impl NStepReturns {
 
     /// Adds one env step (observation, action, reward, next observation, how it ended). Calls `emit`
     /// for each transition it completes, oldest first, and returns how many open transitions a
-    /// truncation dropped (0 unless `end.truncated` and n > 1).
-    pub fn push(
+    /// truncation dropped (0 unless `end.truncated` and n > 1). The first error of `emit` is
+    /// returned at once; the transitions not yet emitted stay open.
+    pub fn push<E>(
         &mut self,
         observation: &[f32],
         action: &[f32],
         reward: f32,
         next_observation: &[f32],
         end: StepEnd,
-        mut emit: impl FnMut(NStepTransition<'_>),
-    ) -> usize {
+        mut emit: impl FnMut(NStepTransition<'_>) -> Result<(), E>,
+    ) -> Result<usize, E> {
         let mut entry = self.spare.pop().unwrap_or_default();
         entry.observation.clear();
         entry.observation.extend_from_slice(observation);
@@ -100,7 +109,7 @@ impl NStepReturns {
         };
         for _ in 0..complete {
             let done = self.open.pop_front().expect("counted above");
-            emit(NStepTransition {
+            let emitted = emit(NStepTransition {
                 observation: &done.observation,
                 action: &done.action,
                 reward: done.reward,
@@ -108,8 +117,9 @@ impl NStepReturns {
                 terminated: end.terminated,
             });
             self.spare.push(done);
+            emitted?;
         }
-        if end.truncated && !end.terminated { self.clear() } else { 0 }
+        Ok(if end.truncated && !end.terminated { self.clear() } else { 0 })
     }
 
     /// Abandons the open transitions (a truncation, or an episode reset after a bad step) and
@@ -133,9 +143,11 @@ mod tests {
         for (t, &r) in rewards.iter().enumerate() {
             let end = if t + 1 == rewards.len() { last } else { StepEnd::default() };
             let (obs, next) = ([t as f32], [t as f32 + 1.0]);
-            dropped += acc.push(&obs, &[0.0], r, &next, end, |tr| {
-                out.push((tr.observation[0], tr.reward, tr.next_observation[0], tr.terminated))
+            let emitted = acc.push(&obs, &[0.0], r, &next, end, |tr| {
+                out.push((tr.observation[0], tr.reward, tr.next_observation[0], tr.terminated));
+                Ok::<_, ()>(())
             });
+            dropped += emitted.unwrap();
         }
         (out, dropped)
     }
@@ -174,13 +186,15 @@ mod tests {
     #[test]
     fn an_episode_after_a_clear_starts_fresh() {
         let mut acc = NStepReturns::new(2, 1.0);
-        acc.push(&[0.0], &[0.0], 5.0, &[1.0], StepEnd::default(), |_| panic!("incomplete"));
+        acc.push(&[0.0], &[0.0], 5.0, &[1.0], StepEnd::default(), |_| Err("incomplete")).unwrap();
         assert_eq!(acc.clear(), 1);
         let mut out = Vec::new();
         for t in 0..2 {
             acc.push(&[t as f32], &[0.0], 1.0, &[t as f32 + 1.0], StepEnd::default(), |tr| {
-                out.push(tr.reward)
-            });
+                out.push(tr.reward);
+                Ok::<_, ()>(())
+            })
+            .unwrap();
         }
         assert_eq!(out, vec![2.0]);
         assert_eq!(acc.open(), 1);

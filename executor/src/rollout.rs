@@ -57,7 +57,7 @@ impl Rollout {
         let spec = env.spec().clone();
         let observation = to_f32(&env.reset(Some(reset_seed)));
         let pending = Transitions::with_capacity(spec.obs_dim as u32, spec.act_dim as u32, 64);
-        let n_step = NStepReturns::new(actor.config().n_step, actor.config().discount);
+        let n_step = NStepReturns::for_config(actor.config());
         Self {
             executor_id,
             env,
@@ -125,20 +125,17 @@ impl Rollout {
         let truncated = step.truncated || self.episode_length >= self.episode_limit;
         // Only a true termination stops bootstrapping; the time limit does not.
         let end = StepEnd { terminated: step.terminated, truncated };
-        let (pending, mut stored) = (&mut self.pending, Ok(()));
+        let pending = &mut self.pending;
         let dropped_n_step_tail =
             self.n_step.push(&self.observation, &act.action, reward, &next_observation, end, |t| {
-                if stored.is_ok() {
-                    stored = pending.push(Transition {
-                        observation: t.observation,
-                        action: t.action,
-                        reward: t.reward,
-                        next_observation: t.next_observation,
-                        terminated: t.terminated,
-                    });
-                }
-            });
-        stored?;
+                pending.push(Transition {
+                    observation: t.observation,
+                    action: t.action,
+                    reward: t.reward,
+                    next_observation: t.next_observation,
+                    terminated: t.terminated,
+                })
+            })?;
         if step.terminated || truncated {
             let report = EpisodeReport {
                 executor_id: self.executor_id,

@@ -1,9 +1,10 @@
 //! Flush-to-zero for the fused update: subnormal floats (|x| < 1.2e-38) cost x86 cores a microcode
 //! assist per instruction that reads or writes one, a hundred cycles or more instead of a few.
-//! Training makes them: Adam's moments of weights whose gradient is (nearly) always zero (the Ant's
-//! unused contact-force inputs) decay geometrically through the subnormal range. Checkpoints of
-//! 20-minute Ant runs held 13,000-23,000 subnormal values, all in Adam moments, and in those runs
-//! the update thread slowed by up to a third as they accumulated. With FTZ and DAZ set, the
+//! Training makes them: the Adam moments of weights whose gradient is (nearly) always zero (the
+//! weights out of dead ReLU units, mostly in the critics' and embedding's second layers) decay
+//! geometrically through the subnormal range. Checkpoints of 20-minute Ant runs held 13,000-24,000
+//! subnormal values, all in Adam moments, and in those runs the learner's updates/s fell by a
+//! quarter as they accumulated. With FTZ and DAZ set, the
 //! result of an operation that would be subnormal is 0 and a subnormal input reads as 0: values
 //! below f32's normal range, eight orders of magnitude below any gradient the update uses.
 //!

@@ -62,7 +62,7 @@ impl Trainer {
         actor.load(&learner.snapshot()?)?;
         let replay = ReplayBuffer::new(config.replay.clone(), config.dims())?;
         let observation = to_f32(&env.reset(Some(seed + 2)));
-        let n_step = NStepReturns::new(config.agent.n_step, config.agent.discount);
+        let n_step = NStepReturns::for_config(&config.agent);
         Ok(Self {
             config,
             env,
@@ -141,10 +141,10 @@ impl Trainer {
         let reward = step.reward as f32;
         // Only a true termination stops bootstrapping; the time limit does not.
         let end = StepEnd { terminated: step.terminated, truncated: step.truncated };
-        let (replay, mut stored) = (&mut self.replay, Ok(()));
-        self.n_step.push(&self.observation, &act.action, reward, &next_observation, end, |t| {
-            if stored.is_ok() {
-                stored = replay
+        let replay = &mut self.replay;
+        self.n_step
+            .push(&self.observation, &act.action, reward, &next_observation, end, |t| {
+                replay
                     .insert_batch(TransitionBatch {
                         observations: t.observation,
                         actions: t.action,
@@ -153,10 +153,9 @@ impl Trainer {
                         terminated: &[t.terminated],
                         abs_td_errors: None,
                     })
-                    .map(drop);
-            }
-        });
-        stored.context("storing a transition")?;
+                    .map(drop)
+            })
+            .context("storing a transition")?;
         self.env_steps += 1;
         self.episode_return += step.reward;
         if step.terminated || step.truncated {
