@@ -6,8 +6,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
-use node::{Bus, Shutdown};
-use proto::{SampleReply, SampleRequest, topics};
+use node::{Bus, Rejects, Shutdown};
+use proto::{RejectCount, SampleReply, SampleRequest, topics};
 use tokio::sync::mpsc;
 
 use crate::batch::Sampled;
@@ -21,8 +21,8 @@ pub struct FetchStatus {
     pub refused: std::collections::BTreeMap<String, u64>,
     /// Requests nobody answered within the timeout (replay server down or restarting).
     pub unanswered: u64,
-    /// Replies that did not decode, by reason.
-    pub bad_replies: u64,
+    /// Replies that did not decode, by `sample_reply/<reason>`.
+    pub bad_replies: Vec<RejectCount>,
     /// Why no batch arrives now; cleared by the next batch.
     pub waiting: Option<Waiting>,
 }
@@ -54,6 +54,9 @@ pub struct Waiting {
 #[derive(Debug, Default)]
 pub struct Fetcher {
     status: Mutex<FetchStatus>,
+    /// Undecodable replies: counted by reason, logged at most once per reason every few seconds
+    /// (a flood of them once wrote a line per reply).
+    bad_replies: Mutex<Rejects>,
     next_request: AtomicU64,
 }
 
@@ -74,9 +77,15 @@ impl Fetcher {
         });
     }
 
+    fn bad_reply(&self, error: &proto::DecodeError) {
+        self.bad_replies.lock().unwrap_or_else(PoisonError::into_inner).decode_failed("sample_reply", error);
+    }
+
     /// The status now.
     pub fn status(&self) -> FetchStatus {
-        self.status.lock().unwrap_or_else(PoisonError::into_inner).clone()
+        let mut status = self.status.lock().unwrap_or_else(PoisonError::into_inner).clone();
+        status.bad_replies = self.bad_replies.lock().unwrap_or_else(PoisonError::into_inner).to_report();
+        status
     }
 }
 
@@ -139,8 +148,7 @@ pub async fn request_loop(r: Requests, batches: mpsc::Sender<Sampled>, mut shutd
                 Duration::from_millis(u64::from(refusal.retry_after_ms).clamp(10, 1000))
             }
             Asked::Reply(Err(error)) => {
-                r.fetcher.update(|s| s.bad_replies += 1);
-                tracing::warn!(%error, "undecodable sample reply");
+                r.fetcher.bad_reply(&error);
                 Duration::from_millis(100)
             }
             Asked::Error(why) => {
@@ -210,6 +218,17 @@ mod tests {
         let (started, for_data) = since(&fetcher).unwrap();
         assert!(started > 1 && !for_data);
         assert!(!fetcher.status().starved(started + 5000, Duration::from_secs(1)), "down is not starved");
+    }
+
+    #[test]
+    fn undecodable_replies_are_counted_by_reason() {
+        let fetcher = Fetcher::default();
+        let error = proto::decode::<SampleReply>(b"not a reply").unwrap_err();
+        for _ in 0..741 {
+            fetcher.bad_reply(&error);
+        }
+        let reason = format!("sample_reply/{}", error.reason());
+        assert_eq!(fetcher.status().bad_replies, vec![RejectCount { reason, count: 741 }]);
     }
 
     #[test]

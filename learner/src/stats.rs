@@ -47,8 +47,6 @@ pub(crate) fn report(
         .iter()
         .map(|(reason, count)| RejectCount { reason: format!("sample_refused/{reason}"), count: *count })
         .collect();
-    if fetch.bad_replies > 0 {
-        r.rejected.push(RejectCount { reason: "sample/bad_reply".into(), count: fetch.bad_replies });
-    }
+    r.rejected.extend(fetch.bad_replies.iter().cloned());
     r
 }
