@@ -87,6 +87,31 @@ impl Actor {
         self.fixed_latent = (0..self.cfg.act_dim).map(|_| rng.sample(StandardNormal)).collect();
     }
 
+    /// Sets the fixed latent to `h` (one value per action dimension) until the next redraw: one h
+    /// shared by several actors, as an evaluation spread over threads needs.
+    pub fn set_fixed_latent(&mut self, h: &[f32]) -> Result<()> {
+        if h.len() != self.cfg.act_dim {
+            return Err(Error::BadInput(format!(
+                "latent has {} values, expected {}",
+                h.len(),
+                self.cfg.act_dim
+            )));
+        }
+        self.fixed_latent = h.to_vec();
+        Ok(())
+    }
+
+    /// Restarts the actor's random stream (the stochastic policy's z and the next redrawn latent)
+    /// at `seed`: an episode's draws then depend on its seed alone, not on what ran before.
+    pub fn reseed(&mut self, seed: u64) {
+        self.rng = StdRng::seed_from_u64(seed);
+    }
+
+    /// The fixed latent of [`Mode::Deterministic`].
+    pub fn fixed_latent(&self) -> &[f32] {
+        &self.fixed_latent
+    }
+
     /// Sets the fixed latent to h = 0 (the counterpart of a Gaussian policy's mean action) until the
     /// next redraw.
     pub fn zero_fixed_latent(&mut self) {

@@ -70,6 +70,7 @@ mod nstep;
 mod optim;
 mod params;
 mod policy;
+mod schema;
 mod stack;
 mod target;
 mod vars;
@@ -95,6 +96,7 @@ pub use nstep::{NStepReturns, NStepTransition, StepEnd};
 pub use optim::{Adam, AdamConfig};
 pub use params::{Checkpoint, ParamSnapshot};
 pub use policy::{BijectorOutput, LatentPolicy, PolicySample};
+pub use schema::{Schema, networks_from_schema, snapshot_schema};
 pub use stack::{Level, PolicyStack};
 pub use target::polyak_update;
 

@@ -6,6 +6,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 mod csv;
+mod eval;
 mod json;
 mod monitor;
 mod plot;
@@ -30,6 +31,8 @@ enum Command {
     Monitor(monitor::MonitorArgs),
     /// Draw learning curves (PNG) from a `monitor` record.
     Plot(plot::PlotArgs),
+    /// Evaluate a checkpoint's policy: N episodes, per-episode CSV, JSON summary.
+    Eval(eval::EvalArgs),
 }
 
 fn main() -> Result<()> {
@@ -44,5 +47,6 @@ fn main() -> Result<()> {
         Command::Train(args) => train::run(&args),
         Command::Monitor(args) => monitor::run(&args),
         Command::Plot(args) => plot::run(&args),
+        Command::Eval(args) => eval::run(&args),
     }
 }

@@ -91,6 +91,19 @@ pub struct LearnerConfig {
     pub train: RunKeys,
     /// `[replay_server]`, the one key the learner must agree with.
     pub replay_server: ReplayDeadline,
+    /// `[param_server]`, the task dimensions it checks weights against.
+    pub param_server: ParamServerDims,
+}
+
+/// The dimensions the param server builds its weights schema from, read from the shared run file
+/// so a learner whose task differs refuses to start instead of having every frame refused.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(default)]
+pub struct ParamServerDims {
+    /// `obs_dim` (absent: the param server takes the schema from the first frame).
+    pub obs_dim: Option<u32>,
+    /// `act_dim`.
+    pub act_dim: Option<u32>,
 }
 
 /// The replay server's request deadline, read from the shared run file to check the learner's
@@ -154,6 +167,19 @@ impl node::RoleConfig for LearnerConfig {
             ));
         }
         self.task()?;
+        let dims = &self.param_server;
+        for (key, theirs, ours) in
+            [("obs_dim", dims.obs_dim, self.agent.obs_dim), ("act_dim", dims.act_dim, self.agent.act_dim)]
+        {
+            if let Some(theirs) = theirs
+                && theirs as usize != ours
+            {
+                return Err(format!(
+                    "[param_server] {key} = {theirs}, but the task {} has {ours}: the param server would refuse every weights frame",
+                    self.train.task
+                ));
+            }
+        }
         self.agent.validate().map_err(|e| format!("[agent] {e}"))
     }
 
@@ -209,5 +235,14 @@ mod tests {
             ..LearnerConfig::parse("[train]\ntask = \"ant-v5\"\n").unwrap()
         };
         assert!(short.validate().unwrap_err().contains("(1000)"));
+    }
+
+    #[test]
+    fn the_param_servers_dimensions_must_be_the_tasks() {
+        let text =
+            |obs: u32| format!("[train]\ntask = \"ant-v5\"\n[param_server]\nobs_dim = {obs}\nact_dim = 8\n");
+        assert_eq!(LearnerConfig::parse(&text(105)).unwrap().validate(), Ok(()));
+        let err = LearnerConfig::parse(&text(27)).unwrap().validate().unwrap_err();
+        assert!(err.contains("[param_server] obs_dim = 27, but the task ant-v5 has 105"), "{err}");
     }
 }

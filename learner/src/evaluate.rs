@@ -17,14 +17,19 @@ pub struct Evaluation {
     pub mean_length: f64,
 }
 
-/// Runs `episodes` episodes of `actor` on `env` in `mode` (each to termination or the time limit).
-pub fn evaluate(
-    actor: &mut Actor,
-    env: &mut dyn Environment,
-    episodes: u32,
-    mode: EvalMode,
-) -> anyhow::Result<Evaluation> {
-    let act_mode = match mode {
+/// One evaluation episode.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Episode {
+    /// Undiscounted return.
+    pub episode_return: f64,
+    /// Steps until termination or the time limit.
+    pub length: u64,
+}
+
+/// Prepares `actor`'s latent for `mode` (the fixed-latent mode draws a new h here) and returns how
+/// it must act in every episode of the evaluation.
+pub fn prepare_latent(actor: &mut Actor, mode: EvalMode) -> Mode {
+    match mode {
         EvalMode::FixedLatent => {
             actor.redraw_fixed_latent();
             Mode::Deterministic
@@ -34,23 +39,45 @@ pub fn evaluate(
             Mode::Deterministic
         }
         EvalMode::Stochastic => Mode::Explore,
-    };
+    }
+}
+
+/// Runs one episode of `actor` acting in `mode` on `env`, reset with `seed` (`None`: the env's own
+/// stream), to termination or the time limit.
+pub fn run_episode(
+    actor: &mut Actor,
+    env: &mut dyn Environment,
+    mode: Mode,
+    seed: Option<u64>,
+) -> anyhow::Result<Episode> {
+    let mut observation = to_f32(&env.reset(seed));
+    let (mut episode_return, mut length) = (0.0, 0);
+    loop {
+        let act = actor.act(&observation, mode)?;
+        let action = env.spec().action_from_unit(&act.env_action);
+        let step = env.step(&action)?;
+        episode_return += step.reward;
+        length += 1;
+        if step.terminated || step.truncated {
+            return Ok(Episode { episode_return, length });
+        }
+        observation = to_f32(&step.observation);
+    }
+}
+
+/// Runs `episodes` episodes of `actor` on `env` in `mode` (each to termination or the time limit).
+pub fn evaluate(
+    actor: &mut Actor,
+    env: &mut dyn Environment,
+    episodes: u32,
+    mode: EvalMode,
+) -> anyhow::Result<Evaluation> {
+    let act_mode = prepare_latent(actor, mode);
     let (mut returns, mut total_length) = (Vec::new(), 0.0);
     for _ in 0..episodes {
-        let mut observation = to_f32(&env.reset(None));
-        let mut episode_return = 0.0;
-        loop {
-            let act = actor.act(&observation, act_mode)?;
-            let action = env.spec().action_from_unit(&act.env_action);
-            let step = env.step(&action)?;
-            episode_return += step.reward;
-            total_length += 1.0;
-            if step.terminated || step.truncated {
-                break;
-            }
-            observation = to_f32(&step.observation);
-        }
-        returns.push(episode_return);
+        let episode = run_episode(actor, env, act_mode, None)?;
+        returns.push(episode.episode_return);
+        total_length += episode.length as f64;
     }
     let n = f64::from(episodes.max(1));
     let mean_return = returns.iter().sum::<f64>() / n;

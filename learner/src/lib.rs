@@ -47,7 +47,7 @@ use agent::{Actor, AnyLearner, ParamSnapshot};
 pub use batch::Sampled;
 pub use checkpoint::CheckpointDir;
 pub use config::{LearnerConfig, LearnerSettings};
-pub use evaluate::{Evaluation, evaluate};
+pub use evaluate::{Episode, Evaluation, evaluate, prepare_latent, run_episode};
 pub use fetch::{FetchStatus, Fetcher, Requests, Waiting};
 use node::{Bus, Shutdown};
 use proto::{EvalMode, EvalReport};

@@ -1,18 +1,15 @@
 //! What the param server checks in a weights frame's body before it accepts or serves it: a
 //! well-formed safetensors file (header, offsets and sizes, via the `safetensors` crate), f32
-//! tensors with finite values only, and the same tensor names and shapes as the weights it took
-//! first. One corrupt or forged frame would otherwise reach every executor that fetches it.
+//! tensors with finite values only, and the tensor names and shapes of the run's networks. One
+//! corrupt or forged frame would otherwise reach every executor that fetches it.
 //!
-//! The schema is taken from the first frame accepted, which in a run is the learner's: the param
-//! server does not build networks itself (it needs no task, no MuJoCo, no candle). Executors check
-//! each snapshot against their own networks as well, all or nothing, and keep acting when one fails.
+//! The schema comes from the run file (`[param_server] obs_dim`/`act_dim` with `[agent]`, through
+//! `agent::snapshot_schema`, which builds no network); a run file without the dimensions falls back
+//! to the first frame accepted, normally the learner's. Executors check each snapshot against
+//! their own networks as well, all or nothing, and keep acting when one fails.
 
-use std::collections::BTreeMap;
-
+pub use agent::Schema;
 use safetensors::{Dtype, SafeTensors};
-
-/// Tensor names and shapes of a weights snapshot.
-pub type Schema = BTreeMap<String, Vec<usize>>;
 
 /// Why a body was refused: a `weights/<reason>` count and a detail for the log.
 #[derive(Debug, Clone, PartialEq, Eq)]

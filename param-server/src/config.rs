@@ -1,8 +1,10 @@
-//! `[param_server]` table of the run configuration.
+//! `[param_server]` table of the run configuration, and the run's `[agent]` networks when the
+//! table names the task's dimensions.
 
+use agent::AgentConfig;
 use serde::Deserialize;
 
-use crate::BarrierRule;
+use crate::{BarrierRule, Schema};
 
 /// Configuration of the param-server role.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -27,6 +29,17 @@ pub struct ParamServerConfig {
     /// and counted (`param/rejected.learner_step/implausible_step`), so a forged frame cannot pin
     /// the barrier. Default 100 000, ~50x what the fused learner makes here.
     pub max_learner_steps_per_s: u64,
+    /// Observation width of the task. With `act_dim`, the weights frames are checked against the
+    /// tensor names and shapes of the run's `[agent]` networks from the first frame on; absent
+    /// (default), the schema is taken from the first frame accepted, so a forged frame that
+    /// arrives before the learner's would pin it. The learner refuses to start if these differ
+    /// from its task's.
+    pub obs_dim: Option<u32>,
+    /// Action width of the task; see `obs_dim`.
+    pub act_dim: Option<u32>,
+    /// The run's networks (`[agent]` with the dimensions above), read when both are set.
+    #[serde(skip)]
+    pub networks: Option<AgentConfig>,
 }
 
 impl Default for ParamServerConfig {
@@ -38,6 +51,9 @@ impl Default for ParamServerConfig {
             announce_interval_ms: 200,
             stats_interval_ms: 1000,
             max_learner_steps_per_s: crate::step_guard::DEFAULT_MAX_LEARNER_STEPS_PER_S,
+            obs_dim: None,
+            act_dim: None,
+            networks: None,
         }
     }
 }
@@ -50,6 +66,11 @@ impl ParamServerConfig {
             warm_up_transitions: self.warm_up_transitions,
             max_weight_lag: self.max_weight_lag,
         }
+    }
+
+    /// The tensor names and shapes every weights frame must have, when the run's networks are known.
+    pub fn weights_schema(&self) -> Option<Schema> {
+        self.networks.as_ref().map(agent::snapshot_schema)
     }
 }
 
@@ -67,7 +88,23 @@ impl node::RoleConfig for ParamServerConfig {
         if let Some(key) = node::config::first_zero(&positive) {
             return Err(format!("{key} must be > 0"));
         }
-        Ok(())
+        match (self.obs_dim, self.act_dim, &self.networks) {
+            (None, None, None) => Ok(()),
+            (Some(_), Some(_), Some(networks)) => networks.validate().map_err(|e| format!("[agent] {e}")),
+            _ => Err("obs_dim and act_dim must be set together (or neither)".into()),
+        }
+    }
+
+    /// The `[param_server]` table; with both dimensions set, also the `[agent]` table.
+    fn parse(text: &str) -> Result<Self, String> {
+        let mut config: Self = node::config::parse_section(text, Self::SECTION)?;
+        if let (Some(obs_dim), Some(act_dim)) = (config.obs_dim, config.act_dim) {
+            let agent: AgentConfig =
+                node::config::parse_section(text, "agent").map_err(|e| format!("[agent] {e}"))?;
+            config.networks =
+                Some(AgentConfig { obs_dim: obs_dim as usize, act_dim: act_dim as usize, ..agent });
+        }
+        Ok(config)
     }
 }
 
@@ -87,5 +124,25 @@ mod tests {
         let parsed = ParamServerConfig::parse("[param_server]\nmax_weight_lag = 3\n").unwrap();
         assert_eq!(parsed.max_weight_lag, Some(3));
         assert!(ParamServerConfig::parse("[param_server]\nmax_wieght_lag = 3\n").is_err());
+        assert_eq!(parsed.weights_schema(), None);
+    }
+
+    #[test]
+    fn the_dimensions_bring_the_run_s_networks() {
+        let text = "[agent]\ncritic_hidden = [4]\ntwin_q = true\n[param_server]\nobs_dim = 3\nact_dim = 2\n";
+        let parsed = ParamServerConfig::parse(text).unwrap();
+        assert_eq!(parsed.validate(), Ok(()));
+        let networks = parsed.networks.clone().unwrap();
+        assert_eq!((networks.obs_dim, networks.act_dim, networks.critic_hidden.as_slice()), (3, 2, &[4][..]));
+        let schema = parsed.weights_schema().unwrap();
+        assert_eq!(schema["q1.layer0.weight_observation"], vec![4, 3]);
+        assert!(schema.contains_key("q2.layer0.weight_action"));
+        // One dimension alone, or bad networks, are named.
+        let half = ParamServerConfig::parse("[param_server]\nobs_dim = 3\n").unwrap();
+        assert!(half.validate().unwrap_err().contains("obs_dim and act_dim"));
+        let bad = ParamServerConfig::parse("[agent]\ntau = 2.0\n[param_server]\nobs_dim = 3\nact_dim = 2\n")
+            .unwrap();
+        let err = bad.validate().unwrap_err();
+        assert!(err.starts_with("[agent]") && err.contains("tau must be"), "{err}");
     }
 }

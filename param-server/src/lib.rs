@@ -88,6 +88,16 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
     tracing::info!(rule = ?config.rule(), "param-server up");
 
     let mut state = State::new(config.rule()).with_step_guard(StepGuard::new(config.max_learner_steps_per_s));
+    match config.weights_schema() {
+        Some(schema) => {
+            tracing::info!(tensors = schema.len(), "weights checked against the run's networks");
+            state = state.with_schema(schema);
+        }
+        None => tracing::warn!(
+            "[param_server] names no obs_dim/act_dim: the weights schema is taken from the first \
+             frame accepted, so a forged frame arriving before the learner's would pin it"
+        ),
+    }
     let mut latest: Option<zenoh::bytes::ZBytes> = None;
     let mut announce = tokio::time::interval(Duration::from_millis(config.announce_interval_ms));
     let mut stats = tokio::time::interval(Duration::from_millis(config.stats_interval_ms));

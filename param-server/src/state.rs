@@ -45,7 +45,8 @@ pub struct State {
     learner_moved_at: Instant,
     /// Starved learner and blocked barrier: when they make a deadlock.
     starvation: StarvationWatch,
-    /// The tensor names and shapes of the weights taken first; every later body must match.
+    /// The tensor names and shapes every body must have: the run's networks', or else those of
+    /// the first weights taken.
     schema: Option<Schema>,
     /// Refuses learner steps that move implausibly far (a forged frame would pin the barrier).
     step_guard: StepGuard,
@@ -64,6 +65,12 @@ impl State {
             schema: None,
             step_guard: StepGuard::default(),
         }
+    }
+
+    /// The same state checking every weights body against `schema` (the run's networks) from the
+    /// first frame on, instead of against the first frame taken.
+    pub fn with_schema(self, schema: Schema) -> Self {
+        Self { schema: Some(schema), ..self }
     }
 
     /// The same state with learner steps bounded by `guard` instead of the default.
@@ -331,6 +338,21 @@ mod tests {
         // The run goes on: the next good snapshot is taken.
         assert!(s.on_weights(&weights(30)));
         assert_eq!(s.announcement().weights_version, 30);
+    }
+
+    #[test]
+    fn with_the_run_s_schema_a_forged_first_frame_pins_nothing() {
+        let run_schema: Schema = [("policy.w".to_string(), vec![3, 2])].into();
+        let mut s = State::new(rule()).with_schema(run_schema);
+        // A well-formed frame of other networks arrives before the learner's: refused, not adopted.
+        assert!(!s.on_weights(&weights_with(1 << 40, body(4, 0.5))));
+        assert_eq!(s.rejects().counts()["weights/schema_mismatch"], 1);
+        assert!(s.on_weights(&weights(10)));
+        assert_eq!(s.announcement().weights_version, 10);
+        // Without it, the first frame taken sets the schema, and the learner's would be refused.
+        let mut pinned = State::new(rule());
+        assert!(pinned.on_weights(&weights_with(5, body(4, 0.5))));
+        assert!(!pinned.on_weights(&weights(10)));
     }
 
     #[test]

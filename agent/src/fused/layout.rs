@@ -315,6 +315,17 @@ impl Layout {
         Ok(())
     }
 
+    /// `{role}.{name}` and the shape of every array of the roles in `roles`, as snapshots name them.
+    pub(crate) fn names_and_shapes<'a>(
+        &'a self,
+        roles: &'a [Role],
+    ) -> impl Iterator<Item = (String, Vec<usize>)> + 'a {
+        self.arrays
+            .iter()
+            .filter(|a| roles.contains(&a.role))
+            .map(|a| (format!("{}.{}", a.role.name(), a.name), a.shape.clone()))
+    }
+
     /// Appends every array of the roles in `roles` as `{prefix(role)}.{name}` tensors.
     pub(crate) fn export(
         &self,
@@ -348,11 +359,7 @@ mod tests {
         };
         let layout = Layout::new(&cfg);
         let snapshot = Learner::new(cfg.clone(), 1).unwrap().snapshot().unwrap().tensors().unwrap();
-        let mut ours: Vec<(String, Vec<usize>)> = layout
-            .arrays
-            .iter()
-            .map(|a| (format!("{}.{}", a.role.name(), a.name), a.shape.clone()))
-            .collect();
+        let mut ours: Vec<(String, Vec<usize>)> = layout.names_and_shapes(&Role::ALL).collect();
         let mut theirs: Vec<(String, Vec<usize>)> =
             snapshot.iter().map(|(n, t)| (n.clone(), t.dims().to_vec())).collect();
         ours.sort();
@@ -372,11 +379,7 @@ mod tests {
                 .filter(|(n, _)| !n.starts_with("adam.") && !n.starts_with("learner."))
                 .map(|(n, t)| (n.clone(), t.dims().to_vec()))
                 .collect();
-            let mut ours: Vec<(String, Vec<usize>)> = layout
-                .arrays
-                .iter()
-                .map(|a| (format!("{}.{}", a.role.name(), a.name), a.shape.clone()))
-                .collect();
+            let mut ours: Vec<(String, Vec<usize>)> = layout.names_and_shapes(&Role::ALL).collect();
             ours.sort();
             theirs.sort();
             assert_eq!(ours, theirs, "act_dim {}", options.act_dim);

@@ -42,7 +42,7 @@ mod denormals;
 mod dense;
 mod dispatch;
 mod flow;
-mod layout;
+pub(crate) mod layout;
 mod linalg;
 mod objective;
 mod tanh;

@@ -1,0 +1,332 @@
+//! `sac-lsp eval`: evaluates a checkpoint's policy for N episodes (the paper's 200) in one latent
+//! mode, writes every episode's return and length as CSV and prints a JSON summary.
+//!
+//! Episode i resets the task with seed + i and draws its stochastic latents from a stream seeded
+//! by (seed, i); the fixed latent is drawn once from the seed. So the figures depend on the seed
+//! alone, not on how many threads share the episodes.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+
+use agent::{Actor, AgentConfig, ParamSnapshot, Schema};
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use learner::{Episode, prepare_latent, run_episode};
+use node::RunKeys;
+use proto::EvalMode;
+use sim::Task;
+
+use crate::json::{Object, Value};
+
+/// Options of `sac-lsp eval`.
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// The weights: a learner checkpoint (the distributed learner's `learner-<step>.safetensors`,
+    /// `sac-lsp train`'s `epoch-<n>.safetensors`) or a weights snapshot. The networks' sizes are
+    /// read from its tensors.
+    #[arg(long)]
+    checkpoint: PathBuf,
+    /// Task to evaluate on: ant-v5, ant-rllab or inverted-pendulum (default: the run file's
+    /// `[train] task`, else ant-v5).
+    #[arg(long)]
+    task: Option<Task>,
+    /// Run file whose `[agent]` table gives what the tensors cannot (squashed actions, the
+    /// embedding's output activation); without it, a bottom level's: squashed, ReLU.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Episodes to run.
+    #[arg(long, default_value_t = 200)]
+    episodes: u32,
+    /// How the policy picks its latent: `fixed` is the paper's (one h ~ N(0, I) held for the
+    /// whole evaluation), `zero` uses h = 0 (a Gaussian policy's mean action), `stochastic` draws a
+    /// fresh z every step.
+    #[arg(long, value_enum, default_value_t = Latent::Fixed)]
+    latent: Latent,
+    /// Seed of the resets and the latents.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Threads the episodes are spread over (the figures do not depend on it).
+    #[arg(long, default_value_t = 1)]
+    threads: usize,
+    /// Per-episode CSV (episode, return, length); default: beside the checkpoint, named after it,
+    /// the mode and the seed.
+    #[arg(long)]
+    csv: Option<PathBuf>,
+}
+
+/// `--latent`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Latent {
+    /// One h ~ N(0, I) for the whole evaluation (the paper's).
+    Fixed,
+    /// h = 0.
+    Zero,
+    /// A fresh z ~ N(0, I) every step.
+    Stochastic,
+}
+
+impl Latent {
+    fn mode(self) -> EvalMode {
+        match self {
+            Latent::Fixed => EvalMode::FixedLatent,
+            Latent::Zero => EvalMode::ZeroLatent,
+            Latent::Stochastic => EvalMode::Stochastic,
+        }
+    }
+}
+
+/// The policy to evaluate, as read from the checkpoint file.
+struct Policy {
+    config: AgentConfig,
+    snapshot: ParamSnapshot,
+    learner_step: Option<u64>,
+}
+
+/// Runs the evaluation.
+pub fn run(args: &EvalArgs) -> Result<()> {
+    if args.episodes == 0 || args.threads == 0 {
+        bail!("--episodes and --threads must be at least 1");
+    }
+    let run_file = args.config.as_deref().map(read_run_file).transpose()?;
+    let task = match (args.task, &run_file) {
+        (Some(task), _) => task,
+        (None, Some((keys, _))) => keys.task.parse().with_context(|| "[train] task of the run file")?,
+        (None, None) => Task::AntV5,
+    };
+    let base = run_file.map(|(_, agent)| agent).unwrap_or_default();
+    let policy = read_policy(&args.checkpoint, &base)?;
+    let spec = task.make(0)?.spec().clone();
+    let (obs_dim, act_dim) = (policy.config.obs_dim, policy.config.act_dim);
+    if (obs_dim, act_dim) != (spec.obs_dim, spec.act_dim) {
+        bail!(
+            "{}: the networks take {obs_dim} observation and {act_dim} action values, but {task} has {} and {}",
+            args.checkpoint.display(),
+            spec.obs_dim,
+            spec.act_dim
+        );
+    }
+    let episodes = run_episodes(args, task, &policy)?;
+    let csv = args.csv.clone().unwrap_or_else(|| default_csv(&args.checkpoint, args.latent, args.seed));
+    write_csv(&csv, &episodes)?;
+    println!("{}", summary(args, task, &policy, &episodes, &csv));
+    Ok(())
+}
+
+/// The `[train]` keys and `[agent]` table of a run file.
+fn read_run_file(path: &Path) -> Result<(RunKeys, AgentConfig)> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let parse = |section: &str| format!("{}: [{section}]", path.display());
+    let keys: RunKeys = node::config::parse_section(&text, "train")
+        .map_err(anyhow::Error::msg)
+        .with_context(|| parse("train"))?;
+    let agent: AgentConfig = node::config::parse_section(&text, "agent")
+        .map_err(anyhow::Error::msg)
+        .with_context(|| parse("agent"))?;
+    Ok((keys, agent))
+}
+
+/// Reads the weights and the networks they fit.
+fn read_policy(path: &Path, base: &AgentConfig) -> Result<Policy> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let snapshot = ParamSnapshot { version: 0, safetensors: bytes };
+    let tensors = snapshot
+        .tensors()
+        .map_err(|e| anyhow::anyhow!("{} is not a safetensors file: {e}", path.display()))?;
+    let schema: Schema = tensors.iter().map(|(name, t)| (name.clone(), t.dims().to_vec())).collect();
+    let config = agent::networks_from_schema(&schema, base)
+        .map_err(|e| anyhow::anyhow!("{} holds no SAC-LSP policy: {e}", path.display()))?;
+    let learner_step = tensors
+        .get("learner.step")
+        .and_then(|t| t.flatten_all().ok()?.to_vec1::<i64>().ok()?.first().copied())
+        .and_then(|step| u64::try_from(step).ok());
+    Ok(Policy { config, snapshot, learner_step })
+}
+
+/// Runs every episode, spread over the threads, and returns them in episode order.
+fn run_episodes(args: &EvalArgs, task: Task, policy: &Policy) -> Result<Vec<Episode>> {
+    let mode = args.latent.mode();
+    // The fixed latent, drawn once from the seed and shared by every thread.
+    let mut first = Actor::new(policy.config.clone(), args.seed)?;
+    let act_mode = prepare_latent(&mut first, mode);
+    let latent = first.fixed_latent().to_vec();
+    let (sender, receiver) = mpsc::channel::<Result<(u32, Episode)>>();
+    let n = args.episodes;
+    let threads = args.threads.min(n as usize);
+    std::thread::scope(|scope| {
+        for thread in 0..threads {
+            let sender = sender.clone();
+            let latent = &latent;
+            scope.spawn(move || {
+                let work = || -> Result<()> {
+                    let mut env = task.make(args.seed)?;
+                    let mut actor = Actor::new(policy.config.clone(), args.seed)?;
+                    actor.load(&policy.snapshot)?;
+                    actor.set_fixed_latent(latent)?;
+                    for i in (thread as u32..n).step_by(threads) {
+                        let seed = args.seed.wrapping_add(u64::from(i));
+                        // Another stream than the fixed latent's (drawn from the seed itself).
+                        actor.reseed(seed ^ 0x5eed_0000_0000_0000);
+                        let episode = run_episode(&mut actor, env.as_mut(), act_mode, Some(seed))?;
+                        if sender.send(Ok((i, episode))).is_err() {
+                            break;
+                        }
+                    }
+                    Ok(())
+                };
+                if let Err(error) = work() {
+                    let _ = sender.send(Err(error));
+                }
+            });
+        }
+        drop(sender);
+        collect(receiver, n)
+    })
+}
+
+/// Gathers the episodes as they finish, with a progress line on stderr every tenth of the run.
+fn collect(receiver: mpsc::Receiver<Result<(u32, Episode)>>, n: u32) -> Result<Vec<Episode>> {
+    let mut episodes: Vec<Option<Episode>> = vec![None; n as usize];
+    let (mut done, mut sum) = (0u32, 0.0);
+    let every = (n / 10).max(1);
+    for message in receiver {
+        let (i, episode) = message?;
+        episodes[i as usize] = Some(episode);
+        done += 1;
+        sum += episode.episode_return;
+        if done.is_multiple_of(every) || done == n {
+            eprintln!("eval: {done}/{n} episodes, mean return so far {:.1}", sum / f64::from(done));
+        }
+    }
+    episodes
+        .into_iter()
+        .enumerate()
+        .map(|(i, e)| e.with_context(|| format!("episode {i} did not finish")))
+        .collect()
+}
+
+fn default_csv(checkpoint: &Path, latent: Latent, seed: u64) -> PathBuf {
+    let stem = checkpoint.file_stem().and_then(|s| s.to_str()).unwrap_or("checkpoint");
+    let name = format!("{stem}.eval-{}-seed{seed}.csv", args_name(latent));
+    checkpoint.with_file_name(name)
+}
+
+fn args_name(latent: Latent) -> &'static str {
+    match latent {
+        Latent::Fixed => "fixed",
+        Latent::Zero => "zero",
+        Latent::Stochastic => "stochastic",
+    }
+}
+
+fn write_csv(path: &Path, episodes: &[Episode]) -> Result<()> {
+    let mut out = String::from("episode,return,length\n");
+    for (i, e) in episodes.iter().enumerate() {
+        out.push_str(&format!("{i},{},{}\n", e.episode_return, e.length));
+    }
+    let mut file = std::fs::File::create(path).with_context(|| format!("writing {}", path.display()))?;
+    file.write_all(out.as_bytes())?;
+    Ok(())
+}
+
+/// The JSON summary: mean, standard deviation (population), standard error, min, max, median and
+/// mean length of the returns, with what was evaluated and how.
+fn summary(args: &EvalArgs, task: Task, policy: &Policy, episodes: &[Episode], csv: &Path) -> Object {
+    let returns: Vec<f64> = episodes.iter().map(|e| e.episode_return).collect();
+    let n = returns.len() as f64;
+    let mean = returns.iter().sum::<f64>() / n;
+    let std = (returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
+    let mut sorted = returns.clone();
+    sorted.sort_by(f64::total_cmp);
+    let mid = sorted.len() / 2;
+    let median = if sorted.len() % 2 == 1 { sorted[mid] } else { (sorted[mid - 1] + sorted[mid]) / 2.0 };
+    let mean_length = episodes.iter().map(|e| e.length as f64).sum::<f64>() / n;
+    Object::new()
+        .with("checkpoint", args.checkpoint.display().to_string())
+        .with("learner_step", policy.learner_step.map_or(Value::Null, Value::UInt))
+        .with("task", task.name())
+        .with("mode", args.latent.mode().name())
+        .with("episodes", args.episodes)
+        .with("seed", args.seed)
+        .with("mean", mean)
+        .with("std", std)
+        .with("stderr", std / n.sqrt())
+        .with("min", sorted[0])
+        .with("max", sorted[sorted.len() - 1])
+        .with("median", median)
+        .with("mean_length", mean_length)
+        .with("csv", csv.display().to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use agent::Learner;
+
+    use super::*;
+
+    /// A tiny inverted-pendulum learner's checkpoint, written to a fresh folder.
+    fn checkpoint(name: &str, twin_q: bool) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("sac-lsp-eval-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let cfg = AgentConfig {
+            critic_hidden: vec![8],
+            embedding_layers: vec![8, 2],
+            coupling_hidden: vec![4],
+            twin_q,
+            ..AgentConfig::for_task(4, 1)
+        };
+        let learner = Learner::new(cfg, 7).unwrap();
+        let path = dir.join("learner-000000000000.safetensors");
+        std::fs::write(&path, learner.checkpoint().unwrap().safetensors).unwrap();
+        path
+    }
+
+    fn args(checkpoint: &Path, latent: Latent, threads: usize) -> EvalArgs {
+        EvalArgs {
+            checkpoint: checkpoint.to_path_buf(),
+            task: Some(Task::InvertedPendulum),
+            config: None,
+            episodes: 6,
+            latent,
+            seed: 11,
+            threads,
+            csv: None,
+        }
+    }
+
+    #[test]
+    fn the_figures_depend_on_the_seed_not_the_threads() {
+        let path = checkpoint("threads", true);
+        let policy = read_policy(&path, &AgentConfig::default()).unwrap();
+        assert_eq!((policy.config.obs_dim, policy.config.act_dim, policy.config.twin_q), (4, 1, true));
+        assert_eq!(policy.learner_step, Some(0));
+        for latent in [Latent::Fixed, Latent::Zero, Latent::Stochastic] {
+            let one = run_episodes(&args(&path, latent, 1), Task::InvertedPendulum, &policy).unwrap();
+            let three = run_episodes(&args(&path, latent, 3), Task::InvertedPendulum, &policy).unwrap();
+            assert_eq!(one, three, "{latent:?}");
+            assert_eq!(one.len(), 6);
+            assert!(one.iter().all(|e| e.length >= 1 && e.episode_return.is_finite()));
+        }
+        // The whole command writes the CSV beside the checkpoint.
+        run(&args(&path, Latent::Zero, 2)).unwrap();
+        let csv = std::fs::read_to_string(default_csv(&path, Latent::Zero, 11)).unwrap();
+        assert_eq!(csv.lines().count(), 7);
+        assert!(csv.starts_with("episode,return,length\n0,"));
+    }
+
+    #[test]
+    fn bad_input_is_one_line_naming_what_is_wrong() {
+        let path = checkpoint("bad", false);
+        let on_ant = EvalArgs { task: Some(Task::AntV5), ..args(&path, Latent::Zero, 1) };
+        let err = run(&on_ant).unwrap_err().to_string();
+        assert!(err.contains("take 4 observation and 1 action values, but ant-v5 has 105 and 8"), "{err}");
+        let junk = path.with_file_name("junk.safetensors");
+        std::fs::write(&junk, b"not a checkpoint").unwrap();
+        let err = run(&args(&junk, Latent::Zero, 1)).unwrap_err().to_string();
+        assert!(err.contains("is not a safetensors file"), "{err}");
+        let missing = path.with_file_name("missing.safetensors");
+        assert!(format!("{:#}", run(&args(&missing, Latent::Zero, 1)).unwrap_err()).contains("reading"));
+        let none = EvalArgs { episodes: 0, ..args(&path, Latent::Zero, 1) };
+        assert!(run(&none).unwrap_err().to_string().contains("--episodes"));
+    }
+}
