@@ -58,8 +58,13 @@ pub struct AgentConfig {
     pub discount: f32,
     /// Polyak rate tau of the target V. Default 0.01.
     pub tau: f32,
-    /// Adam learning rate of all networks. Default 3e-4.
+    /// Adam learning rate of all networks (at the first update, when it decays). Default 3e-4.
     pub learning_rate: f64,
+    /// With `learning_rate_decay_updates`, the learning rate falls linearly to this over that
+    /// many updates of each network, and stays. Default none (constant).
+    pub final_learning_rate: Option<f64>,
+    /// Updates of the linear decay; 0 (default): constant learning rate.
+    pub learning_rate_decay_updates: u64,
     /// Adam beta1. Default 0.9 (TensorFlow's default).
     pub adam_beta1: f64,
     /// Adam beta2. Default 0.999 (TensorFlow's default).
@@ -109,6 +114,8 @@ impl Default for AgentConfig {
             discount: 0.99,
             tau: 0.01,
             learning_rate: 3e-4,
+            final_learning_rate: None,
+            learning_rate_decay_updates: 0,
             adam_beta1: 0.9,
             adam_beta2: 0.999,
             adam_epsilon: 1e-8,
@@ -186,6 +193,12 @@ impl AgentConfig {
         };
         positive("scale_reward", self.scale_reward.into())?;
         positive("learning_rate", self.learning_rate)?;
+        if let Some(lr) = self.final_learning_rate {
+            positive("final_learning_rate", lr)?;
+            if self.learning_rate_decay_updates == 0 {
+                return fail("final_learning_rate needs learning_rate_decay_updates > 0".into());
+            }
+        }
         positive("adam_epsilon", self.adam_epsilon)?;
         positive("initial_temperature", self.initial_temperature.into())?;
         if !(0.0..=1.0).contains(&self.discount) {

@@ -122,12 +122,7 @@ impl Learner {
         cfg.validate()?;
         let nets = Networks::new(&cfg, seed, DType::F32)?;
         polyak_update(&nets.v_target.vars, &nets.v.vars, cfg.tau.into())?;
-        let adam = AdamConfig {
-            learning_rate: cfg.learning_rate,
-            beta1: cfg.adam_beta1,
-            beta2: cfg.adam_beta2,
-            epsilon: cfg.adam_epsilon,
-        };
+        let adam = AdamConfig::for_agent(&cfg);
         let temperature = if cfg.learn_temperature {
             let vars = VarMap::new();
             let init = candle_nn::Init::Const(f64::from(cfg.initial_temperature).ln());

@@ -14,14 +14,47 @@ use crate::vars::sorted_vars;
 /// Adam's hyperparameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AdamConfig {
-    /// Learning rate.
+    /// Learning rate (at the first step, when it decays).
     pub learning_rate: f64,
+    /// The learning rate reached after `decay_steps` steps, linearly, and kept after.
+    pub final_learning_rate: f64,
+    /// Steps of the linear decay; 0: the learning rate is constant.
+    pub decay_steps: u64,
     /// First-moment decay.
     pub beta1: f64,
     /// Second-moment decay.
     pub beta2: f64,
     /// Added to sqrt(v).
     pub epsilon: f64,
+}
+
+impl AdamConfig {
+    /// The Adam settings of `cfg`'s networks.
+    pub fn for_agent(cfg: &crate::AgentConfig) -> Self {
+        Self {
+            learning_rate: cfg.learning_rate,
+            final_learning_rate: cfg.final_learning_rate.unwrap_or(cfg.learning_rate),
+            decay_steps: cfg.learning_rate_decay_updates,
+            beta1: cfg.adam_beta1,
+            beta2: cfg.adam_beta2,
+            epsilon: cfg.adam_epsilon,
+        }
+    }
+
+    /// lr_t = lr(t) sqrt(1 - b2^t) / (1 - b1^t) for step `t` (1 for the first), in f64, as
+    /// `tf.train.AdamOptimizer` computes it; lr(t) decays linearly from `learning_rate` to
+    /// `final_learning_rate` over `decay_steps`. Both learners take it from here, so they agree bit
+    /// for bit.
+    pub fn step_size(&self, t: u64) -> f64 {
+        let lr = if self.decay_steps == 0 {
+            self.learning_rate
+        } else {
+            let done = ((t.saturating_sub(1)) as f64 / self.decay_steps as f64).min(1.0);
+            self.learning_rate + (self.final_learning_rate - self.learning_rate) * done
+        };
+        let t = t as f64;
+        lr * (1.0 - self.beta2.powf(t)).sqrt() / (1.0 - self.beta1.powf(t))
+    }
 }
 
 #[derive(Debug)]
@@ -61,9 +94,8 @@ impl Adam {
     /// One step with the gradients in `grads`; variables without a gradient are left alone.
     pub fn step(&mut self, grads: &GradStore) -> Result<()> {
         self.steps += 1;
-        let t = self.steps as f64;
         let c = &self.cfg;
-        let lr_t = (c.learning_rate * (1.0 - c.beta2.powf(t)).sqrt() / (1.0 - c.beta1.powf(t))) as f32;
+        let lr_t = c.step_size(self.steps) as f32;
         let (b1, b2, eps) = (c.beta1 as f32, c.beta2 as f32, c.epsilon as f32);
         for slot in &mut self.slots {
             let Some(g) = grads.get(slot.var.as_tensor()) else { continue };
@@ -121,10 +153,36 @@ mod tests {
     use candle_core::DType;
 
     #[test]
+    fn the_learning_rate_decays_linearly_then_stays() {
+        let cfg = AdamConfig {
+            learning_rate: 2e-3,
+            final_learning_rate: 5e-4,
+            decay_steps: 100,
+            beta1: 0.0,
+            beta2: 0.0,
+            epsilon: 1e-8,
+        };
+        // With both betas 0 the bias correction is 1, so the step size is lr(t) itself.
+        assert_eq!(cfg.step_size(1), 2e-3);
+        assert!((cfg.step_size(51) - 1.25e-3).abs() < 1e-15);
+        assert_eq!(cfg.step_size(101), 5e-4);
+        assert_eq!(cfg.step_size(10_000), 5e-4);
+        let constant = AdamConfig { decay_steps: 0, ..cfg };
+        assert_eq!(constant.step_size(10_000), 2e-3);
+    }
+
+    #[test]
     fn first_steps_match_tensorflow_formula() {
         let map = VarMap::new();
         map.get(2, "w", candle_nn::Init::Const(1.0), DType::F32, &Device::Cpu).unwrap();
-        let cfg = AdamConfig { learning_rate: 0.1, beta1: 0.9, beta2: 0.999, epsilon: 1e-8 };
+        let cfg = AdamConfig {
+            learning_rate: 0.1,
+            final_learning_rate: 0.1,
+            decay_steps: 0,
+            beta1: 0.9,
+            beta2: 0.999,
+            epsilon: 1e-8,
+        };
         let mut adam = Adam::new(&map, cfg).unwrap();
         let w = sorted_vars(&map).unwrap()[0].1.clone();
         let (mut m, mut v, mut p) = ([0f64; 2], [0f64; 2], [1f64; 2]);

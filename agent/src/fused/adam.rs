@@ -21,8 +21,7 @@ impl AdamStep {
     /// Step number `t` (1 for the first step): lr_t = lr sqrt(1 - b2^t) / (1 - b1^t) in f64, as
     /// `tf.train.AdamOptimizer` and `optim.rs` compute it.
     pub(crate) fn new(cfg: &AdamConfig, t: u64) -> Self {
-        let t = t as f64;
-        let lr_t = cfg.learning_rate * (1.0 - cfg.beta2.powf(t)).sqrt() / (1.0 - cfg.beta1.powf(t));
+        let lr_t = cfg.step_size(t);
         Self {
             lr_t: lr_t as f32,
             beta1: cfg.beta1 as f32,
@@ -149,7 +148,14 @@ mod tests {
     fn fused_adam_is_bit_equal_to_the_candle_adam() {
         let map = VarMap::new();
         map.get(5, "w", candle_nn::Init::Const(0.5), DType::F32, &Device::Cpu).unwrap();
-        let cfg = AdamConfig { learning_rate: 3e-4, beta1: 0.9, beta2: 0.999, epsilon: 1e-8 };
+        let cfg = AdamConfig {
+            learning_rate: 3e-4,
+            final_learning_rate: 3e-4,
+            decay_steps: 0,
+            beta1: 0.9,
+            beta2: 0.999,
+            epsilon: 1e-8,
+        };
         let mut adam = Adam::new(&map, cfg).unwrap();
         let w = map.all_vars()[0].clone();
         let (mut theta, mut m, mut v) = (vec![0.5f32; 5], vec![0.0; 5], vec![0.0; 5]);

@@ -138,12 +138,7 @@ impl FusedLearner {
             layout.import(&[*role], |r| format!("adam.{}.v", r.name()), &t, &mut adam_v)?;
             *steps = read_i64(&t, &format!("adam.{}.steps", role.name()))? as u64;
         }
-        let adam = AdamConfig {
-            learning_rate: cfg.learning_rate,
-            beta1: cfg.adam_beta1,
-            beta2: cfg.adam_beta2,
-            epsilon: cfg.adam_epsilon,
-        };
+        let adam = AdamConfig::for_agent(&cfg);
         let work = Workspace::new(&cfg, &layout, cfg.batch_size);
         Ok(Self {
             seed: read_i64(&t, "learner.seed")? as u64,

@@ -74,6 +74,7 @@ fn option_variants() -> Vec<AgentConfig> {
         all(AgentConfig { embedding_layers: vec![4], initial_temperature: 0.5, ..tiny() }),
         all(AgentConfig { act_dim: 1, ..tiny() }),
         all(AgentConfig { n_step: 3, ..tiny() }),
+        all(AgentConfig { final_learning_rate: Some(1e-4), learning_rate_decay_updates: 6, ..tiny() }),
     ]
 }
 
