@@ -12,7 +12,7 @@ use std::sync::mpsc;
 use agent::{Actor, AgentConfig, ParamSnapshot, Schema};
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
-use learner::{Episode, prepare_latent, run_episode};
+use learner::{Episode, Evaluation, prepare_latent, run_episode};
 use node::RunKeys;
 use proto::EvalMode;
 use sim::Task;
@@ -207,16 +207,8 @@ fn collect(receiver: mpsc::Receiver<Result<(u32, Episode)>>, n: u32) -> Result<V
 
 fn default_csv(checkpoint: &Path, latent: Latent, seed: u64) -> PathBuf {
     let stem = checkpoint.file_stem().and_then(|s| s.to_str()).unwrap_or("checkpoint");
-    let name = format!("{stem}.eval-{}-seed{seed}.csv", args_name(latent));
-    checkpoint.with_file_name(name)
-}
-
-fn args_name(latent: Latent) -> &'static str {
-    match latent {
-        Latent::Fixed => "fixed",
-        Latent::Zero => "zero",
-        Latent::Stochastic => "stochastic",
-    }
+    let mode = latent.to_possible_value().map_or_else(String::new, |v| v.get_name().to_string());
+    checkpoint.with_file_name(format!("{stem}.eval-{mode}-seed{seed}.csv"))
 }
 
 fn write_csv(path: &Path, episodes: &[Episode]) -> Result<()> {
@@ -232,15 +224,11 @@ fn write_csv(path: &Path, episodes: &[Episode]) -> Result<()> {
 /// The JSON summary: mean, standard deviation (population), standard error, min, max, median and
 /// mean length of the returns, with what was evaluated and how.
 fn summary(args: &EvalArgs, task: Task, policy: &Policy, episodes: &[Episode], csv: &Path) -> Object {
-    let returns: Vec<f64> = episodes.iter().map(|e| e.episode_return).collect();
-    let n = returns.len() as f64;
-    let mean = returns.iter().sum::<f64>() / n;
-    let std = (returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
-    let mut sorted = returns.clone();
+    let Evaluation { mean_return: mean, std_return: std, mean_length } = Evaluation::of(episodes);
+    let mut sorted: Vec<f64> = episodes.iter().map(|e| e.episode_return).collect();
     sorted.sort_by(f64::total_cmp);
     let mid = sorted.len() / 2;
     let median = if sorted.len() % 2 == 1 { sorted[mid] } else { (sorted[mid - 1] + sorted[mid]) / 2.0 };
-    let mean_length = episodes.iter().map(|e| e.length as f64).sum::<f64>() / n;
     Object::new()
         .with("checkpoint", args.checkpoint.display().to_string())
         .with("learner_step", policy.learner_step.map_or(Value::Null, Value::UInt))
@@ -250,7 +238,7 @@ fn summary(args: &EvalArgs, task: Task, policy: &Policy, episodes: &[Episode], c
         .with("seed", args.seed)
         .with("mean", mean)
         .with("std", std)
-        .with("stderr", std / n.sqrt())
+        .with("stderr", std / (sorted.len() as f64).sqrt())
         .with("min", sorted[0])
         .with("max", sorted[sorted.len() - 1])
         .with("median", median)

@@ -17,6 +17,18 @@ pub struct Evaluation {
     pub mean_length: f64,
 }
 
+impl Evaluation {
+    /// The mean and (population) standard deviation of the returns and the mean length of
+    /// `episodes` (zeros for none).
+    pub fn of(episodes: &[Episode]) -> Self {
+        let n = episodes.len().max(1) as f64;
+        let mean_return = episodes.iter().map(|e| e.episode_return).sum::<f64>() / n;
+        let variance = episodes.iter().map(|e| (e.episode_return - mean_return).powi(2)).sum::<f64>() / n;
+        let mean_length = episodes.iter().map(|e| e.length as f64).sum::<f64>() / n;
+        Self { mean_return, std_return: variance.sqrt(), mean_length }
+    }
+}
+
 /// One evaluation episode.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Episode {
@@ -73,16 +85,9 @@ pub fn evaluate(
     mode: EvalMode,
 ) -> anyhow::Result<Evaluation> {
     let act_mode = prepare_latent(actor, mode);
-    let (mut returns, mut total_length) = (Vec::new(), 0.0);
-    for _ in 0..episodes {
-        let episode = run_episode(actor, env, act_mode, None)?;
-        returns.push(episode.episode_return);
-        total_length += episode.length as f64;
-    }
-    let n = f64::from(episodes.max(1));
-    let mean_return = returns.iter().sum::<f64>() / n;
-    let variance = returns.iter().map(|r| (r - mean_return).powi(2)).sum::<f64>() / n;
-    Ok(Evaluation { mean_return, std_return: variance.sqrt(), mean_length: total_length / n })
+    let episodes: Vec<Episode> =
+        (0..episodes).map(|_| run_episode(actor, env, act_mode, None)).collect::<anyhow::Result<_>>()?;
+    Ok(Evaluation::of(&episodes))
 }
 
 fn to_f32(values: &[f64]) -> Vec<f32> {

@@ -18,8 +18,8 @@ pub(crate) struct AdamStep {
 }
 
 impl AdamStep {
-    /// Step number `t` (1 for the first step): lr_t = lr sqrt(1 - b2^t) / (1 - b1^t) in f64, as
-    /// `tf.train.AdamOptimizer` and `optim.rs` compute it.
+    /// Step number `t` (1 for the first step): lr_t from [`AdamConfig::step_size`], the f64
+    /// expression the candle Adam (`optim.rs`) uses too.
     pub(crate) fn new(cfg: &AdamConfig, t: u64) -> Self {
         let lr_t = cfg.step_size(t);
         Self {
