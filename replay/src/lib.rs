@@ -19,7 +19,6 @@
 //! | `schedule.rs` | [`BetaSchedule`]: linear β                                                  |
 //! | `stats.rs`    | [`Counters`], priority min/max/mean, effective sample size, top-k           |
 //! | `snapshot.rs` | versioned, checksummed snapshots; atomic file write                         |
-//! | `checksum.rs` | the snapshot checksum                                                       |
 //! | `error.rs`    | [`ConfigError`], [`ReplayError`], [`SnapshotError`]                         |
 //!
 //! # Identity of a transition
@@ -58,7 +57,6 @@
 
 mod batch;
 mod buffer;
-mod checksum;
 mod config;
 mod error;
 mod schedule;

@@ -1,12 +1,14 @@
 //! Snapshots: the whole buffer (contents, priorities, counters) as one versioned, checksummed
 //! byte stream, and an atomic file write for restarts.
 //!
-//! Format (version 1, little-endian): magic `RLREPLAY`, u32 version, then u64 obs_dim, act_dim,
+//! Format (version 2, little-endian): magic `RLREPLAY`, u32 version, then u64 obs_dim, act_dim,
 //! capacity, observation rows, f64 α, ε, then u64 head, tail, rows written, evicted early,
 //! sampled, updates applied, updates stale; then the arrays: N f64 priorities, N × act_dim f32
 //! actions, N f32 rewards, N u8 terminated, N u32 next-row positions, M × obs_dim f32 rows; then
-//! a u64 checksum of everything before it. Sizes follow from the header, so a short stream fails
-//! with `UnexpectedEof` and a long one leaves its tail unread.
+//! the u32 CRC-32 (`crc32fast`, the checksum of every other file and message of the project) of
+//! everything before it; version 1 ended in a hand-rolled 64-bit checksum and is refused. Sizes
+//! follow from the header, so a short stream fails with `UnexpectedEof` and a long one leaves its
+//! tail unread.
 //!
 //! Restoring rebuilds the sum tree from the leaves; since every node is a pure function of the
 //! leaves (see `sum_tree`), the restored tree is bit-identical and sampling from it with the same
@@ -18,7 +20,6 @@ use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 
 use crate::buffer::ReplayBuffer;
-use crate::checksum::Checksum;
 use crate::config::{Dims, ReplayConfig};
 use crate::error::SnapshotError;
 use crate::storage::Storage;
@@ -27,14 +28,14 @@ use crate::sum_tree::SumTree;
 /// First bytes of every snapshot.
 pub const SNAPSHOT_MAGIC: [u8; 8] = *b"RLREPLAY";
 /// The format version this build writes and reads.
-pub const SNAPSHOT_VERSION: u32 = 1;
+pub const SNAPSHOT_VERSION: u32 = 2;
 
 /// Values per encoded chunk: bounds the staging buffer at 128 KiB for any snapshot size.
 const CHUNK: usize = 16 * 1024;
 
 struct Encoder<'w, W: Write> {
     w: &'w mut W,
-    sum: Checksum,
+    sum: crc32fast::Hasher,
     staging: Vec<u8>,
 }
 
@@ -62,7 +63,7 @@ impl<W: Write> Encoder<'_, W> {
 
 struct Decoder<'r, R: Read> {
     r: &'r mut R,
-    sum: Checksum,
+    sum: crc32fast::Hasher,
     staging: Vec<u8>,
 }
 
@@ -100,7 +101,7 @@ impl ReplayBuffer {
     /// `BufWriter` if it is unbuffered.
     pub fn write_snapshot<W: Write>(&self, w: &mut W) -> Result<(), SnapshotError> {
         let s = &self.storage;
-        let mut e = Encoder { w, sum: Checksum::new(), staging: Vec::new() };
+        let mut e = Encoder { w, sum: crc32fast::Hasher::new(), staging: Vec::new() };
         e.bytes(&SNAPSHOT_MAGIC)?;
         e.bytes(&SNAPSHOT_VERSION.to_le_bytes())?;
         for v in [s.dims.obs_dim as u64, s.dims.act_dim as u64, s.capacity as u64, s.row_capacity as u64] {
@@ -125,7 +126,7 @@ impl ReplayBuffer {
         e.array(&s.terminated, |t| [u8::from(t)])?;
         e.array(&s.next_rows, u32::to_le_bytes)?;
         e.array(&s.rows, f32::to_le_bytes)?;
-        let checksum = e.sum.finish();
+        let checksum = std::mem::take(&mut e.sum).finalize();
         e.w.write_all(&checksum.to_le_bytes())?;
         e.w.flush()?;
         Ok(())
@@ -136,7 +137,7 @@ impl ReplayBuffer {
     /// and state-shaping settings with typed errors, and corrupt data by its checksum.
     pub fn read_snapshot<R: Read>(r: &mut R, cfg: ReplayConfig, dims: Dims) -> Result<Self, SnapshotError> {
         cfg.validate(dims)?;
-        let mut d = Decoder { r, sum: Checksum::new(), staging: Vec::new() };
+        let mut d = Decoder { r, sum: crc32fast::Hasher::new(), staging: Vec::new() };
         if d.bytes()? != SNAPSHOT_MAGIC {
             return Err(SnapshotError::BadMagic);
         }
@@ -173,10 +174,10 @@ impl ReplayBuffer {
         d.array(&mut storage.terminated, |[b]| b != 0)?;
         d.array(&mut storage.next_rows, u32::from_le_bytes)?;
         d.array(&mut storage.rows, f32::from_le_bytes)?;
-        let expected_sum = d.sum.finish();
-        let mut found = [0; 8];
+        let expected_sum = std::mem::take(&mut d.sum).finalize();
+        let mut found = [0; 4];
         d.r.read_exact(&mut found)?;
-        if u64::from_le_bytes(found) != expected_sum {
+        if u32::from_le_bytes(found) != expected_sum {
             return Err(SnapshotError::ChecksumMismatch);
         }
         (storage.head, storage.tail, storage.rows_written, storage.evicted_early) =

@@ -142,10 +142,11 @@ fn other_formats_versions_dims_and_settings_are_rejected() {
     magic[0] = b'X';
     assert!(matches!(restore(&magic), Err(SnapshotError::BadMagic)));
     let mut version = bytes.clone();
-    version[8..12].copy_from_slice(&2u32.to_le_bytes());
+    // Version 1, the format before the CRC-32 trailer, is refused by name, not as a bad checksum.
+    version[8..12].copy_from_slice(&1u32.to_le_bytes());
     let err = restore(&version).unwrap_err();
-    assert!(matches!(err, SnapshotError::UnsupportedVersion { found: 2, supported: 1 }));
-    assert_eq!(err.to_string(), "snapshot format version 2 is not supported (this build reads 1)");
+    assert!(matches!(err, SnapshotError::UnsupportedVersion { found: 1, supported: 2 }));
+    assert_eq!(err.to_string(), "snapshot format version 1 is not supported (this build reads 2)");
     let other = Dims { obs_dim: 5, act_dim: 3 };
     let other_cfg = ReplayBuffer::read_snapshot(&mut &bytes[..], config(), other).unwrap_err();
     assert_eq!(
@@ -170,11 +171,9 @@ fn a_well_formed_but_inconsistent_snapshot_is_rejected() {
     // Rewrite the tail counter (offset 12 + 7 × 8) to 0 and fix the checksum: the live range would
     // exceed the ring.
     let bytes = bytes_of(&used_buffer());
-    let mut bad = bytes[..bytes.len() - 8].to_vec();
+    let mut bad = bytes[..bytes.len() - 4].to_vec();
     bad[68..76].copy_from_slice(&0u64.to_le_bytes());
-    let mut sum = Checksum::new();
-    sum.update(&bad);
-    bad.extend_from_slice(&sum.finish().to_le_bytes());
+    bad.extend_from_slice(&crc32fast::hash(&bad).to_le_bytes());
     let err = restore(&bad).unwrap_err();
     assert_eq!(err.to_string(), "snapshot is inconsistent: live range larger than the ring");
 }
