@@ -15,7 +15,8 @@ pub enum Family {
     Eval,
     /// `control/step`: [`proto::GlobalStep`].
     Step,
-    /// `control/barrier/*`: [`proto::BarrierReport`].
+    /// `control/barrier/*`: [`proto::BarrierReport`] (one whose executor id is not its key's counts as
+    /// undecodable).
     Barrier,
     /// `liveliness/**`: tokens (a key that names no process counts as undecodable).
     Liveliness,

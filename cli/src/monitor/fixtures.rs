@@ -107,3 +107,7 @@ pub fn eval(epoch: u64, mean_return: f64) -> Vec<u8> {
 pub fn liveliness(role: Role, id: u32) -> String {
     proto::topics::liveliness(&run(), NodeId { role, id })
 }
+
+pub fn barrier_key(executor_id: u32) -> String {
+    proto::Topic::ControlBarrier { executor_id }.key(&run())
+}

@@ -125,7 +125,9 @@ async fn watch(args: &MonitorArgs, duration: Option<Duration>) -> Result<()> {
                 }
             }
             Ok(sample) = steps.recv_async() => state.on_step(&sample.payload().to_bytes()),
-            Ok(sample) = barriers.recv_async() => state.on_barrier(&sample.payload().to_bytes()),
+            Ok(sample) = barriers.recv_async() => {
+                state.on_barrier(sample.key_expr().as_str(), &sample.payload().to_bytes());
+            }
             Ok(sample) = live.recv_async() => {
                 state.on_liveliness(sample.key_expr().as_str(), sample.kind() == SampleKind::Put);
             }

@@ -96,11 +96,20 @@ impl MonitorState {
         }
     }
 
-    /// A [`BarrierReport`] from `control/barrier/<id>`.
-    pub fn on_barrier(&mut self, payload: &[u8]) {
-        if let Some(report) = self.decode::<BarrierReport>(Family::Barrier, payload) {
-            self.observe_steps(report.executor_id, StepSource::Barrier, report.env_steps);
-            self.barriers.insert(report.executor_id, report);
+    /// A [`BarrierReport`] from the key `key` (`control/barrier/<id>`). One whose executor id is not
+    /// the key's is counted as undecodable and dropped, as the param server drops it: a forged or
+    /// misrouted report must not add a phantom executor row.
+    pub fn on_barrier(&mut self, key: &str, payload: &[u8]) {
+        let Some(report) = self.decode::<BarrierReport>(Family::Barrier, payload) else { return };
+        match Topic::parse(&self.run, key) {
+            Ok(Topic::ControlBarrier { executor_id }) if executor_id == report.executor_id => {
+                self.observe_steps(report.executor_id, StepSource::Barrier, report.env_steps);
+                self.barriers.insert(report.executor_id, report);
+            }
+            _ => {
+                tracing::debug!(key, executor_id = report.executor_id, "barrier report not from its key");
+                self.undecodable.add(Family::Barrier);
+            }
         }
     }
 

@@ -79,16 +79,7 @@ fn a_newer_report_replaces_the_older_one() {
 #[test]
 fn env_steps_are_the_newest_of_stats_barrier_and_episodes() {
     let mut s = busy();
-    s.on_barrier(&proto::encode(&BarrierReport {
-        executor_id: 0,
-        env_steps: 3100,
-        allowed_env_steps: 5500,
-        learner_step_seen: 5000,
-        joined_at: 0,
-        weights_version: 4990,
-        blocked: false,
-        blocked_ms_total: 0,
-    }));
+    s.on_barrier(&fixtures::barrier_key(0), &barrier(0, 3100));
     assert_eq!(s.tick(at(1.0)).env_steps_total, Some(6600));
     let record = s.on_episode(at(1.5), &fixtures::episode(0, 3, 250.0, 3200)).unwrap();
     assert_eq!(record.env_steps_total, Some(6700));
@@ -96,6 +87,36 @@ fn env_steps_are_the_newest_of_stats_barrier_and_episodes() {
     let record = s.on_episode(at(1.6), &fixtures::episode(7, 0, 10.0, 1000)).unwrap();
     assert_eq!(record.env_steps_total, Some(7700));
     assert_eq!(s.tick(at(2.0)).executors.last().map(|r| (r.id, r.env_steps)), Some((7, Some(1000))));
+}
+
+fn barrier(executor_id: u32, env_steps: u64) -> Vec<u8> {
+    proto::encode(&BarrierReport {
+        executor_id,
+        env_steps,
+        allowed_env_steps: 5500,
+        learner_step_seen: 5000,
+        joined_at: 0,
+        weights_version: 4990,
+        blocked: false,
+        blocked_ms_total: 0,
+    })
+}
+
+#[test]
+fn a_barrier_report_counts_only_on_its_own_key() {
+    let mut s = busy();
+    let before = s.tick(at(1.0));
+    // Executor 9's report on executor 0's key, and one on a key that is no barrier key.
+    s.on_barrier(&fixtures::barrier_key(0), &barrier(9, 50_000));
+    s.on_barrier("elsewhere/control/barrier/9", &barrier(9, 50_000));
+    let after = s.tick(at(2.0));
+    assert_eq!(after.env_steps_total, before.env_steps_total);
+    assert_eq!(after.executors.iter().map(|r| r.id).collect::<Vec<_>>(), [0, 1, 2], "no phantom row");
+    let line = json::parse(&after.to_json()).unwrap();
+    assert_eq!(line.get("undecodable").and_then(|u| u.get("barrier")).and_then(Value::as_u64), Some(2));
+    // The same report on its own key counts.
+    s.on_barrier(&fixtures::barrier_key(9), &barrier(9, 500));
+    assert_eq!(s.tick(at(3.0)).executors.last().map(|r| (r.id, r.env_steps)), Some((9, Some(500))));
 }
 
 #[test]
