@@ -97,6 +97,9 @@ pub enum Out {
     Progress(Box<Progress>),
 }
 
+/// At most one "non-finite loss" line per this long.
+const NON_FINITE_WARN_EVERY: Duration = Duration::from_secs(5);
+
 /// What the thread did, when it stops.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct UpdaterReport {
@@ -178,6 +181,7 @@ impl Updater {
         let mut total_wait = Duration::ZERO;
         let mut sums = LossMeans::default();
         let mut evals_skipped = 0;
+        let mut non_finite_warned = None;
         loop {
             if s.max_updates.is_some_and(|max| self.learner.step() >= max) {
                 tracing::info!(step = self.learner.step(), "max_updates reached");
@@ -195,12 +199,17 @@ impl Updater {
                 sums.add(&out.metrics);
             } else {
                 report.non_finite_updates += 1;
-                tracing::warn!(
-                    step,
-                    q_loss = out.metrics.q_loss,
-                    v_loss = out.metrics.v_loss,
-                    "non-finite loss"
-                );
+                // A diverging run makes one per update: one line per few seconds, with the count.
+                if non_finite_warned.is_none_or(|at: Instant| at.elapsed() >= NON_FINITE_WARN_EVERY) {
+                    tracing::warn!(
+                        step,
+                        q_loss = out.metrics.q_loss,
+                        v_loss = out.metrics.v_loss,
+                        total = report.non_finite_updates,
+                        "non-finite loss"
+                    );
+                    non_finite_warned = Some(Instant::now());
+                }
             }
             if s.send_priorities {
                 let td_errors = out.td_errors.iter().map(|d| d.abs()).collect();
