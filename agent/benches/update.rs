@@ -18,6 +18,8 @@
 //! fused update from that trained state with subnormals flushed to zero (the learner's default)
 //! and without, and prints `trained checkpoint fused, flush: <N> updates/s, no flush: <M>
 //! updates/s, ratio <R>` (a trained learner's Adam moments hold thousands of subnormal values).
+//! With `UPDATE_BENCH_BATCHES=64,128,256` it times the default's fused update at those batch sizes
+//! and prints `default ant-v5 fused, batch <B>: <N> updates/s, <M> sampled transitions/s`.
 //!
 //! FLOPs are counted from the layer shapes, 2 FLOP per multiply-add:
 //! * nominal (PyTorch-style, as `shared/reference/stack.md` counts): every layer evaluation the
@@ -279,9 +281,50 @@ fn main() -> agent::Result<()> {
         println!("{line}");
     }
     println!("default ant-v5 fused / paper ant-v5 fused: ratio {:.2}", fused_median[1] / fused_median[0]);
+    if let Ok(sizes) = std::env::var("UPDATE_BENCH_BATCHES") {
+        let sizes: Vec<usize> = sizes.split(',').filter_map(|s| s.trim().parse().ok()).collect();
+        batch_sweep(&configs[1].1, &sizes, threads, (warmup, runs, per_window))?;
+    }
     if let Ok(path) = std::env::var("UPDATE_BENCH_CHECKPOINT") {
         let default = &configs[1].1;
         trained_checkpoint(&path, default, threads, (warmup, runs, per_window))?;
+    }
+    Ok(())
+}
+
+/// The default configuration's fused update at other batch sizes, interleaved: the learner's
+/// sampled transitions per second, not its updates per second, bound how fast a run learns (batch
+/// 64 and 128 learned alike per sampled transition), so this prints both.
+fn batch_sweep(
+    cfg: &AgentConfig,
+    sizes: &[usize],
+    threads: usize,
+    (warmup, runs, per_window): (usize, usize, usize),
+) -> agent::Result<()> {
+    let mut learners = Vec::new();
+    for &size in sizes {
+        let cfg = AgentConfig { batch_size: size, ..cfg.clone() };
+        let b = batch(&cfg, size, &mut StdRng::seed_from_u64(5));
+        let mut fused = FusedLearner::new(cfg, 1)?.with_threads(threads);
+        for _ in 0..warmup {
+            fused.update(&b)?;
+        }
+        learners.push((size, fused, b, Vec::new()));
+    }
+    for _ in 0..runs {
+        for (_, fused, b, rates) in &mut learners {
+            rates.push(rate(1, per_window, threads == 1, || {
+                fused.update(b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
+            }));
+        }
+    }
+    println!();
+    for (size, _, _, rates) in &learners {
+        let median = merge(rates).wall.1;
+        println!(
+            "default ant-v5 fused, batch {size}: {median:.0} updates/s, {:.0} sampled transitions/s",
+            median * *size as f64
+        );
     }
     Ok(())
 }
