@@ -1,9 +1,8 @@
-//! Checkpoints on disk: `<dir>/learner-<step>.safetensors`, written atomically (temp file, fsync,
-//! rename), the newest few kept; at start the newest one is resumed from.
+//! Checkpoints on disk: `<dir>/learner-<step>.safetensors`, written atomically (`node::durable`:
+//! temporary file, fsync, rename), the newest few kept; at start the newest one is resumed from.
 
 use std::fs;
-use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use agent::Checkpoint;
 
@@ -55,26 +54,13 @@ impl CheckpointDir {
 
     /// Writes `checkpoint` atomically and removes all but the newest few. Returns its path.
     pub fn write(&self, checkpoint: &Checkpoint) -> std::io::Result<PathBuf> {
-        fs::create_dir_all(&self.dir)?;
         let path = self.path(checkpoint.step);
-        let tmp = path.with_extension("tmp");
-        let mut file = fs::File::create(&tmp)?;
-        file.write_all(&checkpoint.safetensors)?;
-        file.sync_all()?;
-        fs::rename(&tmp, &path)?;
-        sync_dir(&self.dir);
+        node::durable::write(&path, &checkpoint.safetensors)?;
         let steps = self.steps()?;
         for old in steps.iter().take(steps.len().saturating_sub(KEEP)) {
             let _ = fs::remove_file(self.path(*old));
         }
         Ok(path)
-    }
-}
-
-fn sync_dir(dir: &Path) {
-    // Makes the rename durable; failing here loses nothing already written.
-    if let Ok(d) = fs::File::open(dir) {
-        let _ = d.sync_all();
     }
 }
 

@@ -1,6 +1,7 @@
 //! What every process needs to join a run on the bus: command-line options ([`NodeArgs`]), the zenoh
 //! session scoped to a run id ([`Bus`]), a shutdown signal that tests can trigger ([`Shutdown`]),
-//! tracing set-up ([`telemetry`]) and per-crate TOML config tables ([`config`]).
+//! tracing set-up ([`telemetry`]), per-crate TOML config tables ([`config`]) and atomic, durable file
+//! writes ([`durable`]).
 //!
 //! A role binary is a thin `main` over its library's `run(cfg, bus, shutdown)`; [`launch`] is that
 //! `main`, written once for all roles.
@@ -10,6 +11,7 @@ mod args;
 mod bus;
 mod clock;
 pub mod config;
+pub mod durable;
 mod error;
 mod launch;
 mod port;

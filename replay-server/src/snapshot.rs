@@ -12,17 +12,19 @@
 //! ```
 //!
 //! Writing is split so that the buffer being written is needed only while bytes are produced: the
-//! serialisation to `<path>.tmp` ([`FileWriter::write`]) is followed, on a helper thread, by fsync,
-//! rename over `<path>` and fsync of the directory. A crash leaves the previous or the new file.
+//! serialisation to a temporary file beside `<path>` ([`FileWriter::write`]) is followed, on a helper
+//! thread, by [`node::durable::publish`]: fsync, rename over `<path>`, fsync of the directory. A crash
+//! leaves the previous or the new file.
 
 use std::collections::BTreeMap;
-use std::fs::{self, File};
+use std::fs::File;
 use std::io::{self, BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use node::durable;
 use replay::{Dims, ReplayBuffer, ReplayConfig};
 use serde::{Deserialize, Serialize};
 
@@ -206,28 +208,22 @@ impl FileWriter {
     ) -> Result<WriteTimes, SnapshotFileError> {
         self.finish()?;
         let started = Instant::now();
-        let tmp = self.tmp_path();
         let produced = (|| {
-            let file = File::create(&tmp)?;
-            let mut w = BufWriter::with_capacity(1 << 20, Abortable { inner: file, abort });
+            let tmp = durable::temporary_beside(&self.path)?;
+            let mut w = BufWriter::with_capacity(1 << 20, Abortable { inner: tmp, abort });
             write_to(&mut w, buffer, sidecar)?;
-            let file = w.into_inner().map_err(|e| e.into_error())?.inner;
-            let bytes = file.metadata()?.len();
-            Ok::<_, SnapshotFileError>((file, bytes))
+            let tmp = w.into_inner().map_err(|e| e.into_error())?.inner;
+            let bytes = tmp.as_file().metadata()?.len();
+            Ok::<_, SnapshotFileError>((tmp, bytes))
         })();
-        let (file, bytes) = match produced {
-            Ok(done) => done,
-            Err(e) => {
-                // Best effort: a stale temporary file is harmless, the next write truncates it.
-                let _ = fs::remove_file(&tmp);
-                return Err(if abort.load(Ordering::Relaxed) { SnapshotFileError::Aborted } else { e });
-            }
-        };
+        // On failure the temporary file is dropped, which removes it.
+        let (tmp, bytes) = produced
+            .map_err(|e| if abort.load(Ordering::Relaxed) { SnapshotFileError::Aborted } else { e })?;
         let serialise = started.elapsed();
         let path = self.path.clone();
         self.syncing =
             Some(std::thread::Builder::new().name("replay-snapshot-sync".into()).spawn(move || {
-                let published = publish(file, &tmp, &path);
+                let published = durable::publish(tmp, &path);
                 on_durable(&published);
                 published
             })?);
@@ -241,28 +237,12 @@ impl FileWriter {
         }
         Ok(())
     }
-
-    fn tmp_path(&self) -> PathBuf {
-        let mut name = self.path.as_os_str().to_owned();
-        name.push(".tmp");
-        PathBuf::from(name)
-    }
-}
-
-/// fsync the file, rename it over `path`, fsync the directory (the rename is durable only then).
-fn publish(file: File, tmp: &Path, path: &Path) -> io::Result<()> {
-    file.sync_all()?;
-    drop(file);
-    fs::rename(tmp, path)?;
-    #[cfg(unix)]
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        File::open(dir)?.sync_all()?;
-    }
-    Ok(())
 }
 
 #[cfg(test)]
 mod tests {
+    use std::fs;
+
     use super::*;
     use replay::TransitionBatch;
 
@@ -353,7 +333,7 @@ mod tests {
         ));
         let (_, side) = read_file(&path, cfg(), DIMS).unwrap().unwrap();
         assert_eq!(side.sequence, 7, "an aborted write leaves the previous snapshot");
-        assert!(!writer.tmp_path().exists());
+        assert_eq!(fs::read_dir(&dir).unwrap().count(), 1, "and no temporary file");
         fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -18,7 +18,7 @@
 //! | `sum_tree.rs` | [`SumTree`]: sums and maxima of priorities, O(log n), no drift              |
 //! | `schedule.rs` | [`BetaSchedule`]: linear β                                                  |
 //! | `stats.rs`    | [`Counters`], priority min/max/mean, effective sample size, top-k           |
-//! | `snapshot.rs` | versioned, checksummed snapshots; atomic file write                         |
+//! | `snapshot.rs` | versioned, checksummed snapshots to any `Write`, from any `Read`            |
 //! | `error.rs`    | [`ConfigError`], [`ReplayError`], [`SnapshotError`]                         |
 //!
 //! # Identity of a transition

@@ -1,5 +1,5 @@
 //! Snapshots: the whole buffer (contents, priorities, counters) as one versioned, checksummed
-//! byte stream, and an atomic file write for restarts.
+//! byte stream to any `Write` and from any `Read`; the replay server puts it in its snapshot file.
 //!
 //! Format (version 2, little-endian): magic `RLREPLAY`, u32 version, then u64 obs_dim, act_dim,
 //! capacity, observation rows, f64 α, ε, then u64 head, tail, rows written, evicted early,
@@ -15,9 +15,7 @@
 //! RNG seed gives the same batches. The sampling mode and β schedule come from the configuration
 //! given at restore and may change; capacity, rows, α and ε shape the stored state and must match.
 
-use std::fs::{self, File};
-use std::io::{BufReader, BufWriter, Read, Write};
-use std::path::{Path, PathBuf};
+use std::io::{Read, Write};
 
 use crate::buffer::ReplayBuffer;
 use crate::config::{Dims, ReplayConfig};
@@ -190,43 +188,6 @@ impl ReplayBuffer {
             (sampled_total, updates_applied, updates_stale);
         Ok(buffer)
     }
-
-    /// Writes a snapshot to `path` atomically: to `<path>.tmp` in the same directory, fsync,
-    /// rename over `path`, fsync the directory. A crash leaves either the old or the new snapshot.
-    pub fn write_snapshot_file(&self, path: &Path) -> Result<(), SnapshotError> {
-        let tmp = tmp_path(path);
-        let written = (|| {
-            let mut w = BufWriter::with_capacity(1 << 20, File::create(&tmp)?);
-            self.write_snapshot(&mut w)?;
-            let file = w.into_inner().map_err(|e| e.into_error())?;
-            file.sync_all()?;
-            Ok::<_, SnapshotError>(())
-        })();
-        if let Err(e) = written {
-            // Best effort: a stale temporary file is harmless (the next write truncates it).
-            let _ = fs::remove_file(&tmp);
-            return Err(e);
-        }
-        fs::rename(&tmp, path)?;
-        // The rename itself is durable only once the directory entry is synced (POSIX).
-        #[cfg(unix)]
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            File::open(dir)?.sync_all()?;
-        }
-        Ok(())
-    }
-
-    /// Restores the snapshot at `path` (see [`read_snapshot`](Self::read_snapshot)).
-    pub fn read_snapshot_file(path: &Path, cfg: ReplayConfig, dims: Dims) -> Result<Self, SnapshotError> {
-        let mut r = BufReader::with_capacity(1 << 20, File::open(path)?);
-        Self::read_snapshot(&mut r, cfg, dims)
-    }
-}
-
-fn tmp_path(path: &Path) -> PathBuf {
-    let mut name = path.as_os_str().to_owned();
-    name.push(".tmp");
-    PathBuf::from(name)
 }
 
 fn expect(field: &'static str, expected: u64, found: u64) -> Result<(), SnapshotError> {

@@ -89,13 +89,11 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     Ok(())
 }
 
-/// Writes `checkpoints/epoch-<n>.safetensors` atomically (temporary file, then rename).
+/// Writes `checkpoints/epoch-<n>.safetensors` atomically and durably (`node::durable`).
 fn write_checkpoint(out: &Path, epoch: u64, trainer: &Trainer) -> Result<()> {
     let checkpoint = trainer.learner().checkpoint()?;
     let path = out.join("checkpoints").join(format!("epoch-{epoch:05}.safetensors"));
-    let tmp = path.with_extension("partial");
-    std::fs::write(&tmp, &checkpoint.safetensors)?;
-    std::fs::rename(&tmp, &path)?;
+    node::durable::write(&path, &checkpoint.safetensors)?;
     tracing::info!(path = %path.display(), learner_step = checkpoint.step, "checkpoint");
     Ok(())
 }
