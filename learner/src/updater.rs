@@ -97,9 +97,6 @@ pub enum Out {
     Progress(Box<Progress>),
 }
 
-/// At most one "non-finite loss" line per this long.
-const NON_FINITE_WARN_EVERY: Duration = Duration::from_secs(5);
-
 /// What the thread did, when it stops.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct UpdaterReport {
@@ -199,8 +196,8 @@ impl Updater {
                 sums.add(&out.metrics);
             } else {
                 report.non_finite_updates += 1;
-                // A diverging run makes one per update: one line per few seconds, with the count.
-                if non_finite_warned.is_none_or(|at: Instant| at.elapsed() >= NON_FINITE_WARN_EVERY) {
+                // A diverging run makes one per update: one line per node::WARN_EVERY, with the count.
+                if non_finite_warned.is_none_or(|at: Instant| at.elapsed() >= node::WARN_EVERY) {
                     tracing::warn!(
                         step,
                         q_loss = out.metrics.q_loss,

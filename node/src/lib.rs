@@ -26,5 +26,5 @@ pub use config::{RoleConfig, RunKeys};
 pub use error::NodeError;
 pub use launch::{launch, main};
 pub use port::free_loopback_port;
-pub use rejects::Rejects;
+pub use rejects::{Rejects, WARN_EVERY};
 pub use shutdown::{Shutdown, ShutdownTrigger};

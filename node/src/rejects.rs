@@ -6,8 +6,9 @@ use std::time::{Duration, Instant};
 
 use proto::{DecodeError, RejectCount};
 
-/// Minimum time between two warnings for the same reason.
-const WARN_EVERY: Duration = Duration::from_secs(5);
+/// Minimum time between two warnings for the same reason; every rate-limited warning of the roles
+/// uses it (the learner's "non-finite loss" too), so a flood reads the same in every log.
+pub const WARN_EVERY: Duration = Duration::from_secs(5);
 
 #[derive(Debug, Clone)]
 struct WarnState {
