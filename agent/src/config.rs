@@ -149,6 +149,12 @@ impl AgentConfig {
         }
     }
 
+    /// The paper's defaults for level `level` of a hierarchy (0 = the env-facing level): the bottom
+    /// level's as [`Default`], every level above as [`level_above`](Self::level_above) of it.
+    pub fn default_at_level(level: usize) -> Self {
+        if level == 0 { Self::default() } else { Self::default().level_above() }
+    }
+
     /// The discount of the Q target's bootstrap V̄(s'): discount^n_step, since a stored transition
     /// spans n_step env steps.
     pub fn bootstrap_discount(&self) -> f32 {

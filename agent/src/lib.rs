@@ -19,7 +19,7 @@
 //! | `nstep.rs` | [`NStepReturns`]: n-step transitions from a stream of env steps |
 //! | `learning.rs` | [`Learner`]: `update(&Batch) -> UpdateOutput { metrics, td_errors }`, snapshots, checkpoints |
 //! | `acting.rs` | [`Actor`]: `act(obs, Mode)`, `load(&ParamSnapshot)`, `td_errors(&Batch)` |
-//! | `stack.rs` | [`PolicyStack`]: frozen lower levels of a hierarchy |
+//! | `stack.rs` | [`PolicyStack`]: frozen lower levels of a hierarchy, shipped as weights, content-hashed, embedded in checkpoints |
 //! | `params.rs` | [`ParamSnapshot`], [`Checkpoint`]: safetensors bytes with stable names |
 //! | `networks.rs`, `vars.rs` | the networks of one level, each in its own `VarMap`, seeded init |
 //! | `fused/` | [`FusedLearner`]: the same update hand-fused on `gemm`; [`AnyLearner`] picks a [`Backend`] |
@@ -97,7 +97,7 @@ pub use optim::{Adam, AdamConfig};
 pub use params::{Checkpoint, ParamSnapshot};
 pub use policy::{BijectorOutput, LatentPolicy, PolicySample};
 pub use schema::{Schema, networks_from_schema, snapshot_schema};
-pub use stack::{Level, PolicyStack};
+pub use stack::{FROZEN_PREFIX, Level, PolicyStack};
 pub use target::polyak_update;
 
 #[cfg(test)]

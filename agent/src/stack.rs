@@ -5,18 +5,31 @@
 //! frozen level in deterministic mode, a = f_k(h; E_k(s)) (squashed at level 0), down to the env
 //! action. Frozen levels are loaded from their own learners' snapshots and are never trained; the
 //! level being trained stores its own action (h) in replay and never sees the levels below.
+//!
+//! A stack travels as each level's network weights (what a learner snapshot holds, without Adam
+//! moments): the shapes give each level's networks ([`networks_from_schema`]), so a process that
+//! receives them (an executor on another host, `eval` reading a checkpoint) needs nothing else.
+//! [`PolicyStack::content_hash`] names the acting weights, so processes can check they agree.
+
+use std::collections::HashMap;
 
 use candle_core::{DType, Tensor};
+use sha3::{Digest, Sha3_256};
 
 use crate::config::AgentConfig;
 use crate::error::{Error, Result};
 use crate::networks::{Net, policy_net};
-use crate::params::{ParamSnapshot, encode};
+use crate::params::{Checkpoint, ParamSnapshot, decode, encode};
 use crate::policy::LatentPolicy;
+use crate::schema::{Schema, networks_from_schema, snapshot_schema};
 use crate::vars::SeededInit;
 
-/// A trained level to freeze: its configuration and a snapshot holding its `policy.*` weights (other
-/// networks in the snapshot are ignored).
+/// Prefix of the frozen levels' tensors inside a checkpoint of the level above them
+/// (`frozen.<k>.<name>`, k = 0 at the bottom).
+pub const FROZEN_PREFIX: &str = "frozen";
+
+/// A trained level to freeze: its configuration and a snapshot holding its networks (a learner's
+/// snapshot or checkpoint; Adam moments and counters in it are ignored).
 #[derive(Clone, Debug)]
 pub struct Level {
     /// The level's configuration.
@@ -25,11 +38,30 @@ pub struct Level {
     pub snapshot: ParamSnapshot,
 }
 
+impl Level {
+    /// Level `index` of a stack (0 = env-facing) read from safetensors bytes holding its networks:
+    /// a learner checkpoint or weights snapshot. The shapes give the networks; what they cannot
+    /// tell (a squashed action, the embedding's output activation) is the paper's for that position
+    /// ([`AgentConfig::default_at_level`]). The version is the file's `learner.step`, else 0.
+    pub fn from_weights(bytes: &[u8], index: usize) -> Result<Level> {
+        let tensors = decode(bytes)?;
+        let schema: Schema = tensors.iter().map(|(name, t)| (name.clone(), t.dims().to_vec())).collect();
+        let config = networks_from_schema(&schema, &AgentConfig::default_at_level(index))?;
+        let version = match tensors.get("learner.step") {
+            Some(t) => t.flatten_all()?.to_vec1::<i64>()?.first().map_or(0, |&s| s.max(0) as u64),
+            None => 0,
+        };
+        Ok(Level { config, snapshot: ParamSnapshot { version, safetensors: bytes.to_vec() } })
+    }
+}
+
 #[derive(Debug)]
 struct FrozenLevel {
     config: AgentConfig,
     version: u64,
     policy: Net<LatentPolicy>,
+    /// The level's networks only, as shipped to other processes and embedded in checkpoints.
+    weights: Vec<u8>,
 }
 
 /// Frozen levels, bottom (env-facing) first; empty for a single-level agent.
@@ -63,12 +95,97 @@ impl PolicyStack {
                     )));
                 }
             }
+            let tensors = level.snapshot.tensors()?;
             // Initial values are irrelevant: every variable is overwritten from the snapshot.
             let policy = policy_net(&level.config, &SeededInit::new(0), DType::F32)?;
-            policy.import(&level.snapshot.tensors()?)?;
-            frozen.push(FrozenLevel { config: level.config, version: level.snapshot.version, policy });
+            policy.import(&tensors)?;
+            let weights = networks_only(&level.config, &tensors, level.snapshot.version)
+                .map_err(|e| Error::BadStack(format!("level {k}: {e}")))?;
+            frozen.push(FrozenLevel {
+                config: level.config,
+                version: level.snapshot.version,
+                policy,
+                weights,
+            });
         }
         Ok(Self { levels: frozen })
+    }
+
+    /// The stack whose levels' weights are `levels` (bottom first), each as [`Level::from_weights`]
+    /// reads it.
+    pub fn from_weights<B: AsRef<[u8]>>(levels: &[B]) -> Result<Self> {
+        let levels = levels
+            .iter()
+            .enumerate()
+            .map(|(k, bytes)| {
+                Level::from_weights(bytes.as_ref(), k).map_err(|e| Error::BadStack(format!("level {k}: {e}")))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Self::new(levels)
+    }
+
+    /// The frozen levels a checkpoint carries ([`embed`](Self::embed)); empty when it has none.
+    pub fn from_embedded(tensors: &HashMap<String, Tensor>) -> Result<Self> {
+        let mut levels: Vec<Vec<(String, Tensor)>> = Vec::new();
+        for (name, t) in tensors {
+            let Some(rest) = name.strip_prefix(FROZEN_PREFIX).and_then(|r| r.strip_prefix('.')) else {
+                continue;
+            };
+            let (k, inner) = rest
+                .split_once('.')
+                .and_then(|(k, inner)| Some((k.parse::<usize>().ok()?, inner)))
+                .ok_or_else(|| Error::BadStack(format!("tensor {name} is not frozen.<level>.<name>")))?;
+            if k >= 16 {
+                return Err(Error::BadStack(format!("tensor {name}: at most 16 frozen levels")));
+            }
+            if levels.len() <= k {
+                levels.resize_with(k + 1, Vec::new);
+            }
+            levels[k].push((inner.to_string(), t.clone()));
+        }
+        if let Some(k) = levels.iter().position(Vec::is_empty) {
+            return Err(Error::BadStack(format!("frozen level {k} is missing")));
+        }
+        let bytes = levels.iter().map(|t| encode(t, &[])).collect::<Result<Vec<_>>>()?;
+        Self::from_weights(&bytes)
+    }
+
+    /// `checkpoint` with this stack's levels added as `frozen.<k>.<name>`, so evaluating or resuming
+    /// it needs no other file. An empty stack returns it unchanged.
+    pub fn embed(&self, checkpoint: &Checkpoint) -> Result<Checkpoint> {
+        if self.is_empty() {
+            return Ok(checkpoint.clone());
+        }
+        let mut tensors: Vec<(String, Tensor)> = decode(&checkpoint.safetensors)?.into_iter().collect();
+        for (k, level) in self.levels.iter().enumerate() {
+            for (name, t) in decode(&level.weights)? {
+                tensors.push((format!("{FROZEN_PREFIX}.{k}.{name}"), t));
+            }
+        }
+        let safetensors = encode(&tensors, &[("step", checkpoint.step.to_string())])?;
+        Ok(Checkpoint { step: checkpoint.step, safetensors })
+    }
+
+    /// Each level's networks (safetensors bytes), bottom first: what [`from_weights`](Self::from_weights)
+    /// rebuilds this stack from.
+    pub fn weights(&self) -> Vec<&[u8]> {
+        self.levels.iter().map(|l| l.weights.as_slice()).collect()
+    }
+
+    /// SHA3-256 of the acting weights (each level's `policy.*` tensors, names, shapes and values,
+    /// bottom first): equal hashes mean the same env actions for the same latents. Versions and the
+    /// critics do not count.
+    pub fn content_hash(&self) -> Result<[u8; 32]> {
+        let mut hasher = Sha3_256::new();
+        hasher.update((self.levels.len() as u64).to_le_bytes());
+        for level in &self.levels {
+            let mut tensors = Vec::new();
+            level.policy.export(&mut tensors)?;
+            let bytes = encode(&tensors, &[])?;
+            hasher.update((bytes.len() as u64).to_le_bytes());
+            hasher.update(&bytes);
+        }
+        Ok(hasher.finalize().into())
     }
 
     /// Number of frozen levels.
@@ -97,6 +214,11 @@ impl PolicyStack {
         Ok(h)
     }
 
+    /// The configuration of each frozen level, bottom first.
+    pub fn configs(&self) -> impl Iterator<Item = &AgentConfig> {
+        self.levels.iter().map(|l| &l.config)
+    }
+
     /// Each frozen level's policy weights as a snapshot (names `policy.*`, the version it was
     /// frozen at), bottom first: what executors need to rebuild the stack.
     pub fn snapshots(&self) -> Result<Vec<ParamSnapshot>> {
@@ -110,4 +232,17 @@ impl PolicyStack {
             })
             .collect()
     }
+}
+
+/// The tensors of `cfg`'s networks from `tensors` (each present with its shape), as safetensors.
+fn networks_only(cfg: &AgentConfig, tensors: &HashMap<String, Tensor>, version: u64) -> Result<Vec<u8>> {
+    let mut kept = Vec::new();
+    for (name, shape) in snapshot_schema(cfg) {
+        let t = tensors.get(&name).ok_or_else(|| Error::BadSnapshot(format!("no tensor {name}")))?;
+        if t.dims() != shape.as_slice() {
+            return Err(Error::BadSnapshot(format!("{name}: {:?}, expected {shape:?}", t.dims())));
+        }
+        kept.push((name, t.clone()));
+    }
+    encode(&kept, &[("version", version.to_string())])
 }

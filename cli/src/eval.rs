@@ -9,22 +9,23 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 
-use agent::{Actor, AgentConfig, ParamSnapshot, Schema};
+use agent::{Actor, AgentConfig, ParamSnapshot, PolicyStack, Schema};
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use learner::{Episode, Evaluation, prepare_latent, run_episode};
-use node::RunKeys;
+use node::{HierarchyKeys, RunKeys};
 use proto::EvalMode;
 use sim::Task;
 
-use crate::json::{Object, Value};
+use serde::Serialize;
 
 /// Options of `sac-lsp eval`.
 #[derive(Debug, Args)]
 pub struct EvalArgs {
     /// The weights: a learner checkpoint (the distributed learner's `learner-<step>.safetensors`,
     /// `sac-lsp train`'s `epoch-<n>.safetensors`) or a weights snapshot. The networks' sizes are
-    /// read from its tensors.
+    /// read from its tensors. A hierarchy's checkpoint carries its frozen levels; for a file
+    /// without them, the run file's `[hierarchy] levels` are used.
     #[arg(long)]
     checkpoint: PathBuf,
     /// Task to evaluate on: ant-v5, ant-rllab or inverted-pendulum (default: the run file's
@@ -32,7 +33,9 @@ pub struct EvalArgs {
     #[arg(long)]
     task: Option<Task>,
     /// Run file whose `[agent]` table gives what the tensors cannot (squashed actions, the
-    /// embedding's output activation); without it, a bottom level's: squashed, ReLU.
+    /// embedding's output activation), and whose `[hierarchy]` names frozen levels the checkpoint
+    /// does not carry; without it, the paper's for the level's position (a bottom level squashed
+    /// with a ReLU embedding output, a level above neither).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Episodes to run.
@@ -81,6 +84,22 @@ struct Policy {
     config: AgentConfig,
     snapshot: ParamSnapshot,
     learner_step: Option<u64>,
+    /// The frozen levels below it, bottom first (none for a single level).
+    frozen: Vec<Vec<u8>>,
+}
+
+impl Policy {
+    /// An actor with these weights on top of the frozen levels.
+    fn actor(&self, seed: u64) -> Result<Actor> {
+        Ok(Actor::with_stack(self.config.clone(), PolicyStack::from_weights(&self.frozen)?, seed)?)
+    }
+}
+
+/// What a run file says about the policy.
+struct RunFile {
+    keys: RunKeys,
+    agent: AgentConfig,
+    hierarchy: HierarchyKeys,
 }
 
 /// Runs the evaluation.
@@ -91,12 +110,12 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let run_file = args.config.as_deref().map(read_run_file).transpose()?;
     let task = match (args.task, &run_file) {
         (Some(task), _) => task,
-        (None, Some((keys, _))) => keys.task.parse().with_context(|| "[train] task of the run file")?,
+        (None, Some(run)) => run.keys.task.parse().with_context(|| "[train] task of the run file")?,
         (None, None) => Task::AntV5,
     };
-    let base = run_file.map(|(_, agent)| agent).unwrap_or_default();
-    let policy = read_policy(&args.checkpoint, &base)?;
+    let policy = read_policy(&args.checkpoint, run_file.as_ref())?;
     let spec = task.make(0)?.spec().clone();
+    // Real NVP keeps the dimension: every level's action (and latent) is as wide as the env's.
     let (obs_dim, act_dim) = (policy.config.obs_dim, policy.config.act_dim);
     if (obs_dim, act_dim) != (spec.obs_dim, spec.act_dim) {
         bail!(
@@ -109,45 +128,63 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let episodes = run_episodes(args, task, &policy)?;
     let csv = args.csv.clone().unwrap_or_else(|| default_csv(&args.checkpoint, args.latent, args.seed));
     write_csv(&csv, &episodes)?;
-    println!("{}", summary(args, task, &policy, &episodes, &csv));
+    println!("{}", serde_json::to_string(&Summary::new(args, task, &policy, &episodes, &csv))?);
     Ok(())
 }
 
-/// The `[train]` keys and `[agent]` table of a run file.
-fn read_run_file(path: &Path) -> Result<(RunKeys, AgentConfig)> {
+/// The `[train]` keys, `[hierarchy]` and `[agent]` tables of a run file.
+fn read_run_file(path: &Path) -> Result<RunFile> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let parse = |section: &str| format!("{}: [{section}]", path.display());
     let keys: RunKeys = node::config::parse_section(&text, "train")
         .map_err(anyhow::Error::msg)
         .with_context(|| parse("train"))?;
-    let agent: AgentConfig = node::config::parse_section(&text, "agent")
+    let hierarchy: HierarchyKeys = node::config::parse_section(&text, "hierarchy")
+        .map_err(anyhow::Error::msg)
+        .with_context(|| parse("hierarchy"))?;
+    let base = AgentConfig::default_at_level(hierarchy.depth());
+    let agent: AgentConfig = node::config::parse_section_over(&text, "agent", &base)
         .map_err(anyhow::Error::msg)
         .with_context(|| parse("agent"))?;
-    Ok((keys, agent))
+    Ok(RunFile { keys, agent, hierarchy })
 }
 
-/// Reads the weights and the networks they fit.
-fn read_policy(path: &Path, base: &AgentConfig) -> Result<Policy> {
+/// Reads the weights, the networks they fit, and the frozen levels below them.
+fn read_policy(path: &Path, run_file: Option<&RunFile>) -> Result<Policy> {
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
     let snapshot = ParamSnapshot { version: 0, safetensors: bytes };
     let tensors = snapshot
         .tensors()
         .map_err(|e| anyhow::anyhow!("{} is not a safetensors file: {e}", path.display()))?;
+    let in_file = |e: agent::Error| anyhow::anyhow!("{}: {e}", path.display());
+    let embedded = PolicyStack::from_embedded(&tensors).map_err(in_file)?;
+    let frozen: Vec<Vec<u8>> = match run_file {
+        _ if !embedded.is_empty() => embedded.weights().into_iter().map(<[u8]>::to_vec).collect(),
+        Some(run) => run.hierarchy.read().map_err(anyhow::Error::msg)?,
+        None => Vec::new(),
+    };
+    let base = match run_file {
+        Some(run) if run.hierarchy.depth() == frozen.len() => run.agent.clone(),
+        _ => AgentConfig::default_at_level(frozen.len()),
+    };
     let schema: Schema = tensors.iter().map(|(name, t)| (name.clone(), t.dims().to_vec())).collect();
-    let config = agent::networks_from_schema(&schema, base)
+    let config = agent::networks_from_schema(&schema, &base)
         .map_err(|e| anyhow::anyhow!("{} holds no SAC-LSP policy: {e}", path.display()))?;
     let learner_step = tensors
         .get("learner.step")
         .and_then(|t| t.flatten_all().ok()?.to_vec1::<i64>().ok()?.first().copied())
         .and_then(|step| u64::try_from(step).ok());
-    Ok(Policy { config, snapshot, learner_step })
+    let policy = Policy { config, snapshot, learner_step, frozen };
+    // Fails here, with the file named, if the levels do not chain.
+    policy.actor(0).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    Ok(policy)
 }
 
 /// Runs every episode, spread over the threads, and returns them in episode order.
 fn run_episodes(args: &EvalArgs, task: Task, policy: &Policy) -> Result<Vec<Episode>> {
     let mode = args.latent.mode();
     // The fixed latent, drawn once from the seed and shared by every thread.
-    let mut first = Actor::new(policy.config.clone(), args.seed)?;
+    let mut first = policy.actor(args.seed)?;
     let act_mode = prepare_latent(&mut first, mode);
     let latent = first.fixed_latent().to_vec();
     let (sender, receiver) = mpsc::channel::<Result<(u32, Episode)>>();
@@ -160,7 +197,7 @@ fn run_episodes(args: &EvalArgs, task: Task, policy: &Policy) -> Result<Vec<Epis
             scope.spawn(move || {
                 let work = || -> Result<()> {
                     let mut env = task.make(args.seed)?;
-                    let mut actor = Actor::new(policy.config.clone(), args.seed)?;
+                    let mut actor = policy.actor(args.seed)?;
                     actor.load(&policy.snapshot)?;
                     actor.set_fixed_latent(latent)?;
                     for i in (thread as u32..n).step_by(threads) {
@@ -223,27 +260,50 @@ fn write_csv(path: &Path, episodes: &[Episode]) -> Result<()> {
 
 /// The JSON summary: mean, standard deviation (population), standard error, min, max, median and
 /// mean length of the returns, with what was evaluated and how.
-fn summary(args: &EvalArgs, task: Task, policy: &Policy, episodes: &[Episode], csv: &Path) -> Object {
-    let Evaluation { mean_return: mean, std_return: std, mean_length } = Evaluation::of(episodes);
-    let mut sorted: Vec<f64> = episodes.iter().map(|e| e.episode_return).collect();
-    sorted.sort_by(f64::total_cmp);
-    let mid = sorted.len() / 2;
-    let median = if sorted.len() % 2 == 1 { sorted[mid] } else { (sorted[mid - 1] + sorted[mid]) / 2.0 };
-    Object::new()
-        .with("checkpoint", args.checkpoint.display().to_string())
-        .with("learner_step", policy.learner_step.map_or(Value::Null, Value::UInt))
-        .with("task", task.name())
-        .with("mode", args.latent.mode().name())
-        .with("episodes", args.episodes)
-        .with("seed", args.seed)
-        .with("mean", mean)
-        .with("std", std)
-        .with("stderr", std / (sorted.len() as f64).sqrt())
-        .with("min", sorted[0])
-        .with("max", sorted[sorted.len() - 1])
-        .with("median", median)
-        .with("mean_length", mean_length)
-        .with("csv", csv.display().to_string())
+#[derive(Debug, Serialize)]
+struct Summary {
+    checkpoint: String,
+    learner_step: Option<u64>,
+    frozen_levels: usize,
+    task: &'static str,
+    mode: &'static str,
+    episodes: u32,
+    seed: u64,
+    mean: f64,
+    std: f64,
+    stderr: f64,
+    min: f64,
+    max: f64,
+    median: f64,
+    mean_length: f64,
+    csv: String,
+}
+
+impl Summary {
+    fn new(args: &EvalArgs, task: Task, policy: &Policy, episodes: &[Episode], csv: &Path) -> Self {
+        let Evaluation { mean_return: mean, std_return: std, mean_length } = Evaluation::of(episodes);
+        let mut sorted: Vec<f64> = episodes.iter().map(|e| e.episode_return).collect();
+        sorted.sort_by(f64::total_cmp);
+        let mid = sorted.len() / 2;
+        let median = if sorted.len() % 2 == 1 { sorted[mid] } else { (sorted[mid - 1] + sorted[mid]) / 2.0 };
+        Self {
+            checkpoint: args.checkpoint.display().to_string(),
+            learner_step: policy.learner_step,
+            frozen_levels: policy.frozen.len(),
+            task: task.name(),
+            mode: args.latent.mode().name(),
+            episodes: args.episodes,
+            seed: args.seed,
+            mean,
+            std,
+            stderr: std / (sorted.len() as f64).sqrt(),
+            min: sorted[0],
+            max: sorted[sorted.len() - 1],
+            median,
+            mean_length,
+            csv: csv.display().to_string(),
+        }
+    }
 }
 
 #[cfg(test)]
@@ -285,7 +345,7 @@ mod tests {
     #[test]
     fn the_figures_depend_on_the_seed_not_the_threads() {
         let path = checkpoint("threads", true);
-        let policy = read_policy(&path, &AgentConfig::default()).unwrap();
+        let policy = read_policy(&path, None).unwrap();
         assert_eq!((policy.config.obs_dim, policy.config.act_dim, policy.config.twin_q), (4, 1, true));
         assert_eq!(policy.learner_step, Some(0));
         for latent in [Latent::Fixed, Latent::Zero, Latent::Stochastic] {
@@ -316,5 +376,67 @@ mod tests {
         assert!(format!("{:#}", run(&args(&missing, Latent::Zero, 1)).unwrap_err()).contains("reading"));
         let none = EvalArgs { episodes: 0, ..args(&path, Latent::Zero, 1) };
         assert!(run(&none).unwrap_err().to_string().contains("--episodes"));
+    }
+
+    /// A pendulum level above another, as a checkpoint.
+    fn high_level() -> agent::Checkpoint {
+        let cfg = AgentConfig {
+            critic_hidden: vec![8],
+            embedding_layers: vec![8, 2],
+            coupling_hidden: vec![4],
+            ..AgentConfig::for_task(4, 1).level_above()
+        };
+        Learner::new(cfg, 8).unwrap().checkpoint().unwrap()
+    }
+
+    /// A 2-level checkpoint for the pendulum: a level trained on top of `low`, frozen inside it.
+    fn hierarchy_checkpoint(name: &str, low: &Path) -> PathBuf {
+        let stack = PolicyStack::from_weights(&[std::fs::read(low).unwrap()]).unwrap();
+        let path = low.with_file_name(format!("{name}.safetensors"));
+        std::fs::write(&path, stack.embed(&high_level()).unwrap().safetensors).unwrap();
+        path
+    }
+
+    #[test]
+    fn a_hierarchy_checkpoint_evaluates_through_its_frozen_levels() {
+        let low = checkpoint("hierarchy", false);
+        let path = hierarchy_checkpoint("two-level", &low);
+        let policy = read_policy(&path, None).unwrap();
+        assert_eq!(policy.frozen.len(), 1);
+        assert!(!policy.config.squash && !policy.config.embedding_output_relu, "the level-above settings");
+        let one = run_episodes(&args(&path, Latent::Fixed, 1), Task::InvertedPendulum, &policy).unwrap();
+        let two = run_episodes(&args(&path, Latent::Fixed, 2), Task::InvertedPendulum, &policy).unwrap();
+        assert_eq!(one, two);
+        assert!(one.iter().all(|e| e.length >= 1 && e.episode_return.is_finite()));
+        // A plain top-level file with the frozen level named by a run file evaluates the same.
+        let plain = low.with_file_name("top-only.safetensors");
+        std::fs::write(&plain, high_level().safetensors).unwrap();
+        let run_file = low.with_file_name("run.toml");
+        std::fs::write(&run_file, format!("[hierarchy]\nlevels = [{:?}]\n", low.display().to_string()))
+            .unwrap();
+        let named = read_policy(&plain, Some(&read_run_file(&run_file).unwrap())).unwrap();
+        let again = run_episodes(&args(&plain, Latent::Fixed, 1), Task::InvertedPendulum, &named).unwrap();
+        assert_eq!(one, again);
+    }
+
+    #[test]
+    fn a_stack_that_does_not_chain_is_named() {
+        // A frozen level for another task (6 observations) under a pendulum level.
+        let dir = std::env::temp_dir().join(format!("sac-lsp-eval-chain-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let other = AgentConfig {
+            critic_hidden: vec![8],
+            embedding_layers: vec![8, 2],
+            ..AgentConfig::for_task(6, 1)
+        };
+        let low = dir.join("low.safetensors");
+        std::fs::write(&low, Learner::new(other, 1).unwrap().checkpoint().unwrap().safetensors).unwrap();
+        let path = hierarchy_checkpoint("mismatched", &low);
+        let err = format!("{:#}", run(&args(&path, Latent::Zero, 1)).unwrap_err());
+        assert!(
+            err.contains("mismatched.safetensors") && err.contains("top frozen level expects (obs 6"),
+            "{err}"
+        );
+        assert_eq!(err.lines().count(), 1, "{err}");
     }
 }

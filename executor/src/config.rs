@@ -51,6 +51,9 @@ pub struct ExecutorConfig {
     pub agent: AgentConfig,
     /// `[train]`: task and seed.
     pub train: RunKeys,
+    /// `[hierarchy]`: only how many frozen levels there are; the levels themselves come over the
+    /// bus from the param server, so this host needs none of their files.
+    pub hierarchy: node::HierarchyKeys,
 }
 
 impl ExecutorConfig {
@@ -91,7 +94,11 @@ impl node::RoleConfig for ExecutorConfig {
     }
 
     fn parse(text: &str) -> Result<Self, String> {
-        let config: ExecutorConfig = toml::from_str(text).map_err(|e| e.to_string())?;
+        let mut config: ExecutorConfig = toml::from_str(text).map_err(|e| e.to_string())?;
+        // On top of frozen levels, [agent] keys override the level-above settings instead.
+        let base = AgentConfig::default_at_level(config.hierarchy.depth());
+        config.agent =
+            node::config::parse_section_over(text, "agent", &base).map_err(|e| format!("[agent] {e}"))?;
         config.fitted()
     }
 }

@@ -9,6 +9,7 @@
 //! |-----------------------------|-----------|------------------------------------------------------|
 //! | `control/step`              | in        | `GlobalStep`: the barrier and the newest weights version |
 //! | `params/weights` (get)      | query     | `WeightsSnapshot`, fetched only when the version changes |
+//! | `params/frozen` (get)       | query     | `FrozenLevels`, once at start in a hierarchy         |
 //! | `experience/<id>`           | out       | `ExperienceBatch` with initial priorities |δ|          |
 //! | `episodes/<id>`             | out       | `EpisodeReport` per finished episode                 |
 //! | `control/barrier/<id>`      | out       | `BarrierReport` every `report_interval_ms` and on each block/unblock |
@@ -24,6 +25,7 @@
 //! | `inbox.rs`   | [`Inbox`]: newest step and weights, shell → thread                        |
 //! | `worker.rs`  | the rollout thread: barrier, waits with reasons, loading weights          |
 //! | `weights.rs` | the weights fetch task: a `get` whenever a newer version is announced     |
+//! | `frozen.rs`  | a hierarchy's frozen levels, fetched once and checked against their hash  |
 //! | `stats.rs`   | the stats report                                                          |
 //!
 //! The environment and the networks run on their own thread; the async shell only moves messages,
@@ -31,6 +33,7 @@
 #![deny(missing_docs)]
 
 mod config;
+mod frozen;
 mod inbox;
 mod rollout;
 mod stats;
@@ -40,7 +43,7 @@ mod worker;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use agent::Actor;
+use agent::{Actor, PolicyStack};
 pub use config::{ExecutorConfig, ExecutorSettings};
 pub use inbox::{Control, Inbox, Taken};
 use node::{Bus, Rejects, Shutdown};
@@ -79,7 +82,23 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
     let id = bus.node().id;
     let seed = executor_seed(config.train.seed, id);
     let env = config.task().map_err(anyhow::Error::msg)?.make(seed)?;
-    let actor = Actor::new(config.agent.clone(), seed.wrapping_add(1))?;
+    let rejects = Arc::new(Mutex::new(Rejects::default()));
+    let ms = Duration::from_millis;
+    let (stack, stack_hash) = match config.hierarchy.depth() {
+        0 => (PolicyStack::empty(), None),
+        depth => {
+            let (timeout, deadline) =
+                (ms(config.executor.weights_timeout_ms), ms(config.executor.wait_deadline_ms));
+            match frozen::fetch(&bus, depth, timeout, deadline, &rejects, shutdown.clone()).await {
+                Some(fetched) => (fetched.stack, Some(fetched.hash)),
+                None => {
+                    bus.close().await?;
+                    return Ok(Report::default());
+                }
+            }
+        }
+    };
+    let actor = Actor::with_stack(config.agent.clone(), stack, seed.wrapping_add(1))?;
     let rollout = Rollout::new(id, env, actor, seed).with_episode_limit(config.executor.max_episode_steps);
 
     let session = bus.session().clone();
@@ -103,7 +122,6 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
             .spawn(move || worker::run(id, rollout, inbox, out_tx, settings))?
     };
 
-    let rejects = Arc::new(Mutex::new(Rejects::default()));
     let mut report = Report::default();
     // Weights are fetched on a task of their own, so a slow or absent param server never holds up
     // publishing (and with it the rollout thread).
@@ -113,6 +131,7 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
         announced: announced_rx,
         inbox: inbox.clone(),
         timeout: Duration::from_millis(config.executor.weights_timeout_ms),
+        stack: stack_hash,
         rejects: rejects.clone(),
         shutdown: shutdown.clone(),
     }));

@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use agent::ParamSnapshot;
 use node::{Bus, Rejects, Shutdown};
-use proto::{WeightsSnapshot, topics};
+use proto::{ContentHash, WeightsSnapshot, topics};
 use tokio::sync::watch;
 
 use crate::inbox::Inbox;
@@ -22,6 +22,8 @@ pub(crate) struct Fetch {
     pub announced: watch::Receiver<Option<u64>>,
     pub inbox: Arc<Inbox>,
     pub timeout: Duration,
+    /// The frozen levels' hash every snapshot must carry (`None`: a single-level run).
+    pub stack: Option<ContentHash>,
     pub rejects: Arc<Mutex<Rejects>>,
     pub shutdown: Shutdown,
 }
@@ -38,6 +40,21 @@ pub(crate) async fn fetch_loop(mut f: Fetch) -> u64 {
         };
         if wanted {
             match fetch_weights(&f.bus, f.timeout).await {
+                Ok(Some(snapshot)) if snapshot.stack != f.stack => {
+                    // Trained on other levels below: its h would mean something else to ours.
+                    let name = ContentHash::describe;
+                    let detail = format!(
+                        "version {}: trained on {}, acting on {}",
+                        snapshot.version,
+                        name(snapshot.stack),
+                        name(f.stack)
+                    );
+                    crate::lock(&f.rejects).record(
+                        "weights/stack_mismatch",
+                        &detail,
+                        std::time::Instant::now(),
+                    );
+                }
                 Ok(Some(snapshot)) if held.is_none_or(|have| snapshot.version > have) => {
                     held = Some(snapshot.version);
                     fetched += 1;

@@ -93,6 +93,8 @@ pub struct LearnerConfig {
     pub replay_server: ReplayDeadline,
     /// `[param_server]`, the task dimensions it checks weights against.
     pub param_server: ParamServerDims,
+    /// `[hierarchy]`: frozen levels below the trained one (their files are read here).
+    pub hierarchy: node::HierarchyKeys,
 }
 
 /// The dimensions the param server builds its weights schema from, read from the shared run file
@@ -187,6 +189,10 @@ impl node::RoleConfig for LearnerConfig {
     /// launcher can put checkpoints in the run's folder without editing the shared run file).
     fn parse(text: &str) -> Result<Self, String> {
         let mut config: LearnerConfig = toml::from_str(text).map_err(|e| e.to_string())?;
+        // On top of frozen levels, [agent] keys override the level-above settings instead.
+        let base = AgentConfig::default_at_level(config.hierarchy.depth());
+        config.agent =
+            node::config::parse_section_over(text, "agent", &base).map_err(|e| format!("[agent] {e}"))?;
         if let Some(dir) = std::env::var_os(CHECKPOINT_DIR_ENV) {
             config.learner.checkpoint_dir = Some(PathBuf::from(dir));
         }

@@ -43,7 +43,7 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicU64;
 use std::time::{Duration, Instant};
 
-use agent::{Actor, AnyLearner, ParamSnapshot};
+use agent::{Actor, AnyLearner, ParamSnapshot, PolicyStack};
 pub use batch::Sampled;
 pub use checkpoint::CheckpointDir;
 pub use config::{LearnerConfig, LearnerSettings};
@@ -52,7 +52,7 @@ pub use fetch::{FetchStatus, Fetcher, Requests, Waiting};
 use node::{Bus, Shutdown};
 use proto::{EvalMode, EvalReport};
 use tokio::sync::mpsc;
-pub use updater::{LossMeans, Out, Progress, Updater, UpdaterReport};
+pub use updater::{Frozen, LossMeans, Out, Progress, Updater, UpdaterReport};
 
 /// Waiting this long for data (the replay server refusing for lack of it) makes the learner tell the
 /// param server it is starved.
@@ -79,9 +79,25 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     let s = config.learner.clone();
     let seed = config.train.seed;
     let checkpoints = s.checkpoint_dir.as_ref().map(CheckpointDir::new);
+    let levels = config.hierarchy.read().map_err(anyhow::Error::msg)?;
+    let frozen = Frozen::new(PolicyStack::from_weights(&levels)?)?;
+    if let Some((obs_dim, latent_dim)) = frozen.stack.top_dims()
+        && (obs_dim, latent_dim) != (config.agent.obs_dim, config.agent.act_dim)
+    {
+        anyhow::bail!(
+            "[hierarchy] the top frozen level takes {obs_dim} observation values and a {latent_dim}-d latent, \
+             but the trained level ([agent] on the task) has {} and {}",
+            config.agent.obs_dim,
+            config.agent.act_dim
+        );
+    }
+    if let Some(hash) = frozen.hash {
+        tracing::info!(levels = levels.len(), content_hash = %hash, "training on top of frozen levels");
+    }
     let learner = match checkpoints.as_ref().map(CheckpointDir::latest).transpose()?.flatten() {
         Some(checkpoint) => {
             tracing::info!(step = checkpoint.step, "resuming from checkpoint");
+            check_resumed_stack(&checkpoint, &frozen)?;
             AnyLearner::from_checkpoint(config.agent.clone(), &checkpoint, s.backend)?
         }
         None => AnyLearner::new(config.agent.clone(), seed, s.backend)?,
@@ -100,7 +116,11 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     let eval = if s.eval_episodes > 0 {
         let (tx, rx) = std::sync::mpsc::sync_channel::<(u64, ParamSnapshot)>(1);
         let env = config.task().map_err(anyhow::Error::msg)?.make(seed.wrapping_add(3))?;
-        let actor = Actor::new(config.agent.clone(), seed.wrapping_add(5))?;
+        let actor = Actor::with_stack(
+            config.agent.clone(),
+            PolicyStack::from_weights(&levels)?,
+            seed.wrapping_add(5),
+        )?;
         let (out, episodes, mode) = (out_tx.clone(), s.eval_episodes, s.eval_mode);
         std::thread::Builder::new()
             .name("evaluate".into())
@@ -111,7 +131,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     };
     let (batch_tx, batch_rx) = mpsc::channel(s.prefetch_batches as usize);
     let updater =
-        Updater { learner, settings: s.clone(), out: out_tx, eval, checkpoints, step: step.clone() };
+        Updater { learner, settings: s.clone(), out: out_tx, eval, checkpoints, step: step.clone(), frozen };
     let update_thread =
         std::thread::Builder::new().name("update".into()).spawn(move || updater.run(batch_rx))?;
 
@@ -193,6 +213,25 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     drop(outbox);
     bus.close().await?;
     Ok(report)
+}
+
+/// Refuses to resume a checkpoint trained on other frozen levels than the run file names: its
+/// policy's actions mean latents of those levels, not of these.
+fn check_resumed_stack(checkpoint: &agent::Checkpoint, frozen: &Frozen) -> anyhow::Result<()> {
+    let tensors =
+        agent::ParamSnapshot { version: checkpoint.step, safetensors: checkpoint.safetensors.clone() }
+            .tensors()?;
+    let theirs = Frozen::new(PolicyStack::from_embedded(&tensors)?)?.hash;
+    if theirs != frozen.hash {
+        let name = proto::ContentHash::describe;
+        anyhow::bail!(
+            "the checkpoint at step {} was trained on {}, but [hierarchy] names {}: resume with the same levels",
+            checkpoint.step,
+            name(theirs),
+            name(frozen.hash)
+        );
+    }
+    Ok(())
 }
 
 /// Evaluates each (epoch, weights) it receives and reports the result; ends when the sender does.

@@ -7,8 +7,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{SyncSender, TrySendError};
 use std::time::{Duration, Instant};
 
-use agent::{AnyLearner, ParamSnapshot};
-use proto::{EvalReport, LearnerStep, PriorityUpdate, WeightsSnapshot};
+use agent::{AnyLearner, ParamSnapshot, PolicyStack};
+use proto::{ContentHash, EvalReport, LearnerStep, PriorityUpdate, WeightsSnapshot};
 use tokio::sync::mpsc;
 
 use crate::LearnerSettings;
@@ -128,6 +128,26 @@ pub struct Updater {
     pub checkpoints: Option<CheckpointDir>,
     /// The learner step, read by the sample requests.
     pub step: Arc<AtomicU64>,
+    /// The frozen levels below the trained one (empty for a single level): their content hash is
+    /// stamped on every weights frame, and they are embedded in every checkpoint.
+    pub frozen: Frozen,
+}
+
+/// A hierarchy's frozen levels as the update thread uses them.
+#[derive(Debug, Default)]
+pub struct Frozen {
+    /// The levels.
+    pub stack: PolicyStack,
+    /// Their content hash; `None` without levels.
+    pub hash: Option<ContentHash>,
+}
+
+impl Frozen {
+    /// `stack` and its content hash.
+    pub fn new(stack: PolicyStack) -> agent::Result<Self> {
+        let hash = if stack.is_empty() { None } else { Some(ContentHash(stack.content_hash()?)) };
+        Ok(Self { stack, hash })
+    }
 }
 
 impl std::fmt::Debug for Updater {
@@ -150,13 +170,15 @@ impl Updater {
             version,
             learner_step: self.learner.step(),
             safetensors: snapshot.safetensors,
+            stack: self.frozen.hash,
         }));
         Ok(version)
     }
 
     fn checkpoint(&self, report: &mut UpdaterReport) {
         let Some(dir) = &self.checkpoints else { return };
-        match self.learner.checkpoint().map_err(anyhow::Error::from).and_then(|c| Ok(dir.write(&c)?)) {
+        let checkpoint = self.learner.checkpoint().and_then(|c| self.frozen.stack.embed(&c));
+        match checkpoint.map_err(anyhow::Error::from).and_then(|c| Ok(dir.write(&c)?)) {
             Ok(path) => {
                 report.checkpoints += 1;
                 tracing::info!(step = self.learner.step(), path = %path.display(), "checkpoint written");

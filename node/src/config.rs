@@ -2,8 +2,9 @@
 //! `[learner]`, `[agent]`, ...). A missing table means the crate's documented defaults; an unknown key
 //! is an error (the structs use `deny_unknown_fields`), so a typo never silently runs the default.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
+use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use crate::NodeError;
@@ -38,6 +39,51 @@ impl Default for RunKeys {
     fn default() -> Self {
         Self { task: "ant-v5".into(), seed: 1 }
     }
+}
+
+/// The `[hierarchy]` table: a level trained on top of frozen, already trained levels (§1.5).
+#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct HierarchyKeys {
+    /// Checkpoints (or weights snapshots) of the frozen levels, bottom (env-facing) first. Empty (the
+    /// default): a single-level run. The learner and the param server read these files; executors
+    /// receive the levels over the bus, so only their host needs them.
+    pub levels: Vec<PathBuf>,
+}
+
+impl HierarchyKeys {
+    /// Number of frozen levels below the trained one.
+    pub fn depth(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// Reads every level's file, bottom first; the error names the file.
+    pub fn read(&self) -> Result<Vec<Vec<u8>>, String> {
+        self.levels
+            .iter()
+            .map(|path| {
+                std::fs::read(path).map_err(|e| format!("[hierarchy] levels: {}: {e}", path.display()))
+            })
+            .collect()
+    }
+}
+
+/// Deserializes table `section` over `base`: keys the table sets replace `base`'s values, the
+/// others keep them (unknown keys are still errors). So a run file can start a config from
+/// defaults other than `T::default()`, such as the level-above settings of a hierarchy's top level.
+pub fn parse_section_over<T: Serialize + DeserializeOwned>(
+    text: &str,
+    section: &str,
+    base: &T,
+) -> Result<T, String> {
+    let mut document: toml::Table = text.parse().map_err(|e: toml::de::Error| e.to_string())?;
+    let mut merged = toml::Table::try_from(base).map_err(|e| e.to_string())?;
+    match document.remove(section) {
+        Some(toml::Value::Table(table)) => merged.extend(table),
+        Some(_) => return Err(format!("{section} is not a table")),
+        None => {}
+    }
+    merged.try_into().map_err(|e: toml::de::Error| e.to_string())
 }
 
 /// The first `(key, value)` whose value is 0, for "must be > 0" checks in `validate()`.
@@ -99,6 +145,29 @@ mod tests {
         assert_eq!(e, Example { batch_size: 64, name: "x".into() });
         let d: Example = parse_section(text, "missing").unwrap();
         assert_eq!(d, Example::default());
+    }
+
+    #[test]
+    fn a_table_over_a_base_keeps_the_keys_it_does_not_set() {
+        #[derive(Debug, Deserialize, serde::Serialize, PartialEq, Default)]
+        #[serde(default, deny_unknown_fields)]
+        struct Settings {
+            scale: f64,
+            squash: bool,
+            label: Option<String>,
+        }
+        let base = Settings { scale: 3.0, squash: false, label: None };
+        let over: Settings = parse_section_over("[s]\nsquash = true\n", "s", &base).unwrap();
+        assert_eq!(over, Settings { scale: 3.0, squash: true, label: None });
+        let none: Settings = parse_section_over("", "s", &base).unwrap();
+        assert_eq!(none, base);
+        assert!(
+            parse_section_over::<Settings>("[s]\nsqash = true\n", "s", &base).unwrap_err().contains("sqash")
+        );
+        let hierarchy: HierarchyKeys =
+            parse_section("[hierarchy]\nlevels = [\"a\", \"b\"]\n", "hierarchy").unwrap();
+        assert_eq!(hierarchy.depth(), 2);
+        assert!(hierarchy.read().unwrap_err().contains("a:"), "the missing file is named");
     }
 
     #[test]

@@ -22,7 +22,7 @@ pub mod telemetry;
 pub use args::{BusConfig, NodeArgs, ZenohMode};
 pub use bus::{Bus, decode_payload};
 pub use clock::unix_ms;
-pub use config::{RoleConfig, RunKeys};
+pub use config::{HierarchyKeys, RoleConfig, RunKeys};
 pub use error::NodeError;
 pub use launch::{launch, main};
 pub use port::free_loopback_port;

@@ -40,6 +40,10 @@ pub struct ParamServerConfig {
     /// The run's networks (`[agent]` with the dimensions above), read when both are set.
     #[serde(skip)]
     pub networks: Option<AgentConfig>,
+    /// `[hierarchy]`: the frozen levels this role serves to executors (`params/frozen`), and whose
+    /// content hash every weights frame must carry.
+    #[serde(skip)]
+    pub hierarchy: node::HierarchyKeys,
 }
 
 impl Default for ParamServerConfig {
@@ -54,6 +58,7 @@ impl Default for ParamServerConfig {
             obs_dim: None,
             act_dim: None,
             networks: None,
+            hierarchy: node::HierarchyKeys::default(),
         }
     }
 }
@@ -95,12 +100,16 @@ impl node::RoleConfig for ParamServerConfig {
         }
     }
 
-    /// The `[param_server]` table; with both dimensions set, also the `[agent]` table.
+    /// The `[param_server]` and `[hierarchy]` tables; with both dimensions set, also the `[agent]`
+    /// table (over the level-above defaults in a hierarchy).
     fn parse(text: &str) -> Result<Self, String> {
         let mut config: Self = node::config::parse_section(text, Self::SECTION)?;
+        config.hierarchy =
+            node::config::parse_section(text, "hierarchy").map_err(|e| format!("[hierarchy] {e}"))?;
         if let (Some(obs_dim), Some(act_dim)) = (config.obs_dim, config.act_dim) {
+            let base = AgentConfig::default_at_level(config.hierarchy.depth());
             let agent: AgentConfig =
-                node::config::parse_section(text, "agent").map_err(|e| format!("[agent] {e}"))?;
+                node::config::parse_section_over(text, "agent", &base).map_err(|e| format!("[agent] {e}"))?;
             config.networks =
                 Some(AgentConfig { obs_dim: obs_dim as usize, act_dim: act_dim as usize, ..agent });
         }

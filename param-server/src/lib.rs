@@ -8,6 +8,7 @@
 //! |------------------------------|-----------|---------------------------------------------------------|
 //! | `params/publish`             | in        | `WeightsSnapshot` from the learner                      |
 //! | `params/weights` (queryable) | out       | the latest `WeightsSnapshot` (error reply before one exists) |
+//! | `params/frozen` (queryable)  | out       | `FrozenLevels`: a hierarchy's frozen levels, from `[hierarchy]` |
 //! | `control/learner`            | in        | `LearnerStep`: the learner's progress                   |
 //! | `control/barrier/*`          | in        | `BarrierReport` from each executor                      |
 //! | `liveliness/executor/*`      | in        | executors joining and dying                             |
@@ -82,6 +83,9 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
         .map_err(z)?;
     let weights_key = topics::params_weights(&run);
     let queryable = session.declare_queryable(&weights_key).await.map_err(z)?;
+    let frozen_key = topics::params_frozen(&run);
+    let frozen_queryable = session.declare_queryable(&frozen_key).await.map_err(z)?;
+    let frozen = frozen_levels(&config.hierarchy)?;
     let step_pub = session.declare_publisher(topics::control_step(&run)).express(true).await.map_err(z)?;
     // Declared last: seeing the token means every input above is in place.
     let _alive = bus.announce().await?;
@@ -98,6 +102,11 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
              frame accepted, so a forged frame arriving before the learner's would pin it"
         ),
     }
+    if let Some((hash, _)) = &frozen {
+        tracing::info!(levels = config.hierarchy.depth(), content_hash = %hash, "serving frozen levels");
+        state = state.with_stack(*hash);
+    }
+    let frozen_reply = frozen.map(|(_, message)| zenoh::bytes::ZBytes::from(proto::encode(&message)));
     let mut latest: Option<zenoh::bytes::ZBytes> = None;
     let mut announce = tokio::time::interval(Duration::from_millis(config.announce_interval_ms));
     let mut stats = tokio::time::interval(Duration::from_millis(config.stats_interval_ms));
@@ -138,6 +147,16 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
                 state.served();
                 false
             }
+            Ok(query) = frozen_queryable.recv_async() => {
+                let reply = match &frozen_reply {
+                    Some(bytes) => query.reply(&frozen_key, bytes.clone()).await,
+                    None => query.reply_err("this run has no [hierarchy]: no frozen levels").await,
+                };
+                if let Err(error) = reply {
+                    tracing::debug!(%error, "frozen levels reply failed");
+                }
+                false
+            }
             _ = announce.tick() => {
                 state.break_starvation();
                 true
@@ -165,7 +184,22 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
         counts: state.counts(),
         rejected: state.rejects().counts().clone(),
     };
-    drop((publish_sub, learner_sub, barrier_sub, live_sub, queryable, step_pub));
+    drop((publish_sub, learner_sub, barrier_sub, live_sub, queryable, frozen_queryable, step_pub));
     bus.close().await?;
     Ok(report)
+}
+
+/// The frozen levels named by `[hierarchy]`, read and checked (they must chain), with their
+/// content hash; `None` for a single-level run.
+pub fn frozen_levels(
+    hierarchy: &node::HierarchyKeys,
+) -> anyhow::Result<Option<(proto::ContentHash, proto::FrozenLevels)>> {
+    if hierarchy.depth() == 0 {
+        return Ok(None);
+    }
+    let stack = agent::PolicyStack::from_weights(&hierarchy.read().map_err(anyhow::Error::msg)?)?;
+    let content_hash = proto::ContentHash(stack.content_hash()?);
+    let levels =
+        stack.weights().into_iter().map(|w| proto::FrozenLevel { safetensors: w.to_vec() }).collect();
+    Ok(Some((content_hash, proto::FrozenLevels { content_hash, levels })))
 }

@@ -3,7 +3,9 @@
 use std::time::Instant;
 
 use node::Rejects;
-use proto::{BarrierReport, BlockedReason, GlobalStep, LearnerStep, NodeId, StatsReport, WeightsSnapshot};
+use proto::{
+    BarrierReport, BlockedReason, ContentHash, GlobalStep, LearnerStep, NodeId, StatsReport, WeightsSnapshot,
+};
 
 use crate::starvation::StarvationWatch;
 use crate::step_guard::{Implausible, StepGuard};
@@ -50,6 +52,8 @@ pub struct State {
     schema: Option<Schema>,
     /// Refuses learner steps that move implausibly far (a forged frame would pin the barrier).
     step_guard: StepGuard,
+    /// The content hash of the frozen levels served (hierarchies); every weights frame must carry it.
+    stack: Option<ContentHash>,
 }
 
 impl State {
@@ -64,7 +68,13 @@ impl State {
             starvation: StarvationWatch::default(),
             schema: None,
             step_guard: StepGuard::default(),
+            stack: None,
         }
+    }
+
+    /// The same state taking only weights trained on the frozen levels hashed `stack`.
+    pub fn with_stack(self, stack: ContentHash) -> Self {
+        Self { stack: Some(stack), ..self }
     }
 
     /// The same state checking every weights body against `schema` (the run's networks) from the
@@ -103,6 +113,18 @@ impl State {
                 return false;
             }
         };
+        if snapshot.stack != self.stack {
+            // Weights of another hierarchy (or of none) would act on the wrong levels below.
+            let name = ContentHash::describe;
+            let detail = format!(
+                "version {}: trained on {}, this run serves {}",
+                snapshot.version,
+                name(snapshot.stack),
+                name(self.stack)
+            );
+            self.rejects.record("weights/stack_mismatch", &detail, Instant::now());
+            return false;
+        }
         // Repeats and old versions are refused by the store before their bodies are read.
         if self.store.takes(snapshot.version) {
             match check_body(&snapshot.safetensors, self.schema.as_ref()) {
@@ -307,7 +329,7 @@ mod tests {
     }
 
     fn weights_with(version: u64, safetensors: Vec<u8>) -> Vec<u8> {
-        proto::encode(&WeightsSnapshot { version, learner_step: version, safetensors })
+        proto::encode(&WeightsSnapshot { version, learner_step: version, safetensors, stack: None })
     }
 
     fn weights(version: u64) -> Vec<u8> {
@@ -353,6 +375,29 @@ mod tests {
         let mut pinned = State::new(rule());
         assert!(pinned.on_weights(&weights_with(5, body(4, 0.5))));
         assert!(!pinned.on_weights(&weights(10)));
+    }
+
+    #[test]
+    fn in_a_hierarchy_only_weights_trained_on_its_frozen_levels_are_taken() {
+        let ours = ContentHash([1; 32]);
+        let stamped = |version, stack| {
+            proto::encode(&WeightsSnapshot {
+                version,
+                learner_step: version,
+                safetensors: body(3, 0.5),
+                stack,
+            })
+        };
+        let mut s = State::new(rule()).with_stack(ours);
+        assert!(!s.on_weights(&stamped(10, None)), "a single-level learner's");
+        assert!(!s.on_weights(&stamped(11, Some(ContentHash([2; 32])))), "another stack's");
+        assert_eq!(s.rejects().counts()["weights/stack_mismatch"], 2);
+        assert!(s.on_weights(&stamped(12, Some(ours))));
+        assert_eq!(s.announcement().weights_version, 12);
+        // And a single-level run refuses weights of a hierarchy.
+        let mut single = State::new(rule());
+        assert!(!single.on_weights(&stamped(10, Some(ours))));
+        assert!(single.on_weights(&stamped(11, None)));
     }
 
     #[test]

@@ -77,7 +77,7 @@ mod tests {
     use super::*;
 
     fn snapshot(version: u64) -> WeightsSnapshot {
-        WeightsSnapshot { version, learner_step: version, safetensors: vec![version as u8; 4] }
+        WeightsSnapshot { version, learner_step: version, safetensors: vec![version as u8; 4], stack: None }
     }
 
     #[test]

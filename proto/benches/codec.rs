@@ -99,6 +99,6 @@ fn main() {
     bench("experience: 128 Ant transitions", &ant_experience(128), min_time);
     bench("experience: 1000 Ant transitions", &ant_experience(1000), min_time);
     bench("sample reply: 256 Ant transitions", &ant_sample(256), min_time);
-    let weights = WeightsSnapshot { version: 1, learner_step: 1, safetensors: vec![7; 1 << 20] };
+    let weights = WeightsSnapshot { version: 1, learner_step: 1, safetensors: vec![7; 1 << 20], stack: None };
     bench("weights: 1 MiB safetensors", &weights, min_time);
 }

@@ -24,7 +24,7 @@ use crate::error::{DecodeError, ValidationError};
 /// First two bytes of every frame.
 pub const MAGIC: [u8; 2] = *b"SL";
 /// Wire format version; bump on any change to the frame or to any message's fields.
-pub const FORMAT_VERSION: u16 = 2;
+pub const FORMAT_VERSION: u16 = 3;
 /// Bytes before the payload.
 pub const HEADER_LEN: usize = 13;
 /// Largest payload accepted, and the bincode allocation limit while parsing one.
@@ -65,11 +65,13 @@ pub enum MessageKind {
     LearnerStep = 10,
     /// [`crate::EvalReport`].
     EvalReport = 11,
+    /// [`crate::FrozenLevels`].
+    FrozenLevels = 12,
 }
 
 impl MessageKind {
     /// Every kind, in wire-byte order.
-    pub const ALL: [MessageKind; 11] = [
+    pub const ALL: [MessageKind; 12] = [
         MessageKind::ExperienceBatch,
         MessageKind::SampleRequest,
         MessageKind::SampleReply,
@@ -81,6 +83,7 @@ impl MessageKind {
         MessageKind::StatsReport,
         MessageKind::LearnerStep,
         MessageKind::EvalReport,
+        MessageKind::FrozenLevels,
     ];
 
     /// The kind with this wire byte, if any.
@@ -244,7 +247,7 @@ mod tests {
             assert_eq!(MessageKind::from_u8(kind as u8), Some(kind));
         }
         assert_eq!(MessageKind::from_u8(0), None);
-        assert_eq!(MessageKind::from_u8(12), None);
+        assert_eq!(MessageKind::from_u8(13), None);
     }
 
     #[test]

@@ -12,6 +12,7 @@
 //! | `replay/priorities`              | [`PriorityUpdate`]                    | learner                | replay server                     |
 //! | `params/publish`                 | [`WeightsSnapshot`]                   | learner                | param server                      |
 //! | `params/weights` (+ queryable)   | [`WeightsSnapshot`]                   | param server           | executors                         |
+//! | `params/frozen` (queryable)      | [`FrozenLevels`] (hierarchies only)   | param server replies   | executors query once              |
 //! | `control/learner`                | [`LearnerStep`]                       | learner                | param server                      |
 //! | `control/step`                   | [`GlobalStep`]                        | param server           | executors, monitor                |
 //! | `control/barrier/<executor_id>`  | [`BarrierReport`]                     | executor               | param server, monitor             |
@@ -69,7 +70,7 @@ pub use codec::{FORMAT_VERSION, Message, MessageKind, decode, encode, peek_kind}
 pub use control::{BarrierReport, EvalMode, EvalReport, GlobalStep, LearnerStep};
 pub use error::{DecodeError, Result, TopicError, ValidationError};
 pub use experience::{ExperienceBatch, Transition, Transitions};
-pub use params::WeightsSnapshot;
+pub use params::{ContentHash, FrozenLevel, FrozenLevels, MAX_FROZEN_LEVELS, WeightsSnapshot};
 pub use sampling::{
     DEFAULT_REQUEST_DEADLINE_MS, PriorityUpdate, RefusalReason, SampleRefusal, SampleReply, SampleRequest,
     SampledBatch,

@@ -127,6 +127,8 @@ pub enum Topic {
     ParamsWeights,
     /// `params/publish`: [`crate::WeightsSnapshot`], learner → param server.
     ParamsPublish,
+    /// `params/frozen`: queryable; the param server replies with [`crate::FrozenLevels`].
+    ParamsFrozen,
     /// `control/step`: [`crate::GlobalStep`] announcements.
     ControlStep,
     /// `control/learner`: [`crate::LearnerStep`], learner → param server.
@@ -158,6 +160,7 @@ impl Topic {
             Topic::ReplayPriorities => "replay/priorities".to_string(),
             Topic::ParamsWeights => "params/weights".to_string(),
             Topic::ParamsPublish => "params/publish".to_string(),
+            Topic::ParamsFrozen => "params/frozen".to_string(),
             Topic::ControlStep => "control/step".to_string(),
             Topic::ControlLearner => "control/learner".to_string(),
             Topic::Evaluation => "eval".to_string(),
@@ -180,6 +183,7 @@ impl Topic {
             ["replay", "priorities"] => Topic::ReplayPriorities,
             ["params", "weights"] => Topic::ParamsWeights,
             ["params", "publish"] => Topic::ParamsPublish,
+            ["params", "frozen"] => Topic::ParamsFrozen,
             ["control", "step"] => Topic::ControlStep,
             ["control", "learner"] => Topic::ControlLearner,
             ["eval"] => Topic::Evaluation,
@@ -239,6 +243,11 @@ pub fn replay_priorities(run: &RunId) -> String {
 /// `rl/<run>/params/weights`: the param server's broadcast and latest-snapshot queryable.
 pub fn params_weights(run: &RunId) -> String {
     Topic::ParamsWeights.key(run)
+}
+
+/// `rl/<run>/params/frozen`: the param server's queryable of a hierarchy's frozen levels.
+pub fn params_frozen(run: &RunId) -> String {
+    Topic::ParamsFrozen.key(run)
 }
 
 /// `rl/<run>/params/publish`: the learner hands new weights to the param server.
@@ -365,6 +374,7 @@ mod tests {
             Topic::ReplayPriorities,
             Topic::ParamsWeights,
             Topic::ParamsPublish,
+            Topic::ParamsFrozen,
             Topic::ControlStep,
             Topic::ControlLearner,
             Topic::Evaluation,

@@ -212,6 +212,19 @@ fn weights_snapshot() {
         version: 5000,
         learner_step: 5001,
         safetensors: (0..=255).cycle().take(3000).collect(),
+        stack: Some(proto::ContentHash([9; 32])),
+    };
+    check_message(&msg, 7);
+}
+
+#[test]
+fn frozen_levels() {
+    let msg = proto::FrozenLevels {
+        content_hash: proto::ContentHash([3; 32]),
+        levels: vec![
+            proto::FrozenLevel { safetensors: (0..=255).cycle().take(2000).collect() },
+            proto::FrozenLevel { safetensors: vec![1; 40] },
+        ],
     };
     check_message(&msg, 7);
 }
@@ -362,7 +375,7 @@ fn inconsistent_sizes_are_rejected_on_decode() {
         decode::<SampleReply>(&encode(&SampleReply::Batch(slots))),
         invalid(ValidationError::LengthMismatch { field: "slots", expected: 3, found: 2 })
     );
-    let empty = WeightsSnapshot { version: 1, learner_step: 1, safetensors: Vec::new() };
+    let empty = WeightsSnapshot { version: 1, learner_step: 1, safetensors: Vec::new(), stack: None };
     assert_eq!(
         decode::<WeightsSnapshot>(&encode(&empty)),
         invalid(ValidationError::Empty { field: "safetensors" })

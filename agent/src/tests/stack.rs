@@ -69,3 +69,50 @@ fn three_level_stack_and_mismatch_errors() {
     let err = PolicyStack::new(vec![trained_level(&l1, 1), trained_level(&wide, 1)]).unwrap_err();
     assert!(err.to_string().contains("level 1"));
 }
+
+#[test]
+fn a_stack_travels_as_weights_and_inside_a_checkpoint() {
+    let low_cfg = AgentConfig { critic_hidden: vec![8], ..small() };
+    let low = trained_level(&low_cfg, 1);
+    let stack = PolicyStack::new(vec![low.clone()]).unwrap();
+    let hash = stack.content_hash().unwrap();
+
+    // Rebuilt from what it ships: the same acting weights, the bottom level's settings.
+    let shipped: Vec<Vec<u8>> = stack.weights().into_iter().map(<[u8]>::to_vec).collect();
+    let rebuilt = PolicyStack::from_weights(&shipped).unwrap();
+    assert_eq!(rebuilt.content_hash().unwrap(), hash);
+    assert!(rebuilt.configs().next().unwrap().squash);
+    // A learner checkpoint of the level (Adam moments and all) reads as the same level.
+    let mut learner = Learner::new(low_cfg.clone(), 1).unwrap();
+    let batch = random_batch(&low_cfg, 16, 1);
+    for _ in 0..3 {
+        learner.update(&batch).unwrap();
+    }
+    let from_checkpoint = PolicyStack::from_weights(&[learner.checkpoint().unwrap().safetensors]).unwrap();
+    assert_eq!(from_checkpoint.content_hash().unwrap(), hash);
+
+    // Embedded in the level above's checkpoint, and read back from it.
+    let high = Learner::new(low_cfg.level_above(), 2).unwrap();
+    let plain = high.checkpoint().unwrap();
+    let embedded = stack.embed(&plain).unwrap();
+    assert_eq!(embedded.step, plain.step);
+    let tensors = crate::params::decode(&embedded.safetensors).unwrap();
+    assert_eq!(PolicyStack::from_embedded(&tensors).unwrap().content_hash().unwrap(), hash);
+    assert!(
+        PolicyStack::from_embedded(&crate::params::decode(&plain.safetensors).unwrap()).unwrap().is_empty()
+    );
+    // The level above resumes from it as from its own checkpoint.
+    assert!(Learner::from_checkpoint(low_cfg.level_above(), &embedded).is_ok());
+
+    // Other weights hash differently; a gap in the levels and garbage are errors.
+    let other = PolicyStack::new(vec![trained_level(&low_cfg, 9)]).unwrap();
+    assert_ne!(other.content_hash().unwrap(), hash);
+    let mut gap = tensors.clone();
+    let names: Vec<String> = gap.keys().filter(|n| n.starts_with("frozen.0.")).cloned().collect();
+    for name in names {
+        let t = gap.remove(&name).unwrap();
+        gap.insert(name.replacen("frozen.0.", "frozen.1.", 1), t);
+    }
+    assert!(PolicyStack::from_embedded(&gap).unwrap_err().to_string().contains("level 0 is missing"));
+    assert!(PolicyStack::from_weights(&[vec![1u8, 2, 3]]).is_err());
+}

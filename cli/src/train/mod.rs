@@ -91,7 +91,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
 
 /// Writes `checkpoints/epoch-<n>.safetensors` atomically and durably (`node::durable`).
 fn write_checkpoint(out: &Path, epoch: u64, trainer: &Trainer) -> Result<()> {
-    let checkpoint = trainer.learner().checkpoint()?;
+    let checkpoint = trainer.checkpoint()?;
     let path = out.join("checkpoints").join(format!("epoch-{epoch:05}.safetensors"));
     node::durable::write(&path, &checkpoint.safetensors)?;
     tracing::info!(path = %path.display(), learner_step = checkpoint.step, "checkpoint");

@@ -18,6 +18,8 @@ pub struct RunConfig {
     pub agent: AgentConfig,
     /// The replay buffer.
     pub replay: ReplayConfig,
+    /// Frozen levels below the trained one (`[hierarchy]`); none by default.
+    pub hierarchy: node::HierarchyKeys,
 }
 
 impl RunConfig {
@@ -28,10 +30,18 @@ impl RunConfig {
             Some(p) => std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?,
             None => String::new(),
         };
+        let hierarchy: node::HierarchyKeys = parse_table(&text, path, "hierarchy")?;
+        // On top of frozen levels, [agent] keys override the level-above settings instead.
+        let base = AgentConfig::default_at_level(hierarchy.depth());
+        let agent = node::config::parse_section_over(&text, "agent", &base).map_err(|e| {
+            let file = path.map(|p| format!("{}: ", p.display())).unwrap_or_default();
+            anyhow::anyhow!("{file}[agent]: {e}")
+        })?;
         let config = RunConfig {
             train: parse_table(&text, path, "train")?,
-            agent: parse_table(&text, path, "agent")?,
+            agent,
             replay: parse_table(&text, path, "replay")?,
+            hierarchy,
         };
         config.fitted()
     }

@@ -5,7 +5,7 @@
 
 use std::time::Instant;
 
-use agent::{Actor, AnyLearner, Batch, Mode, NStepReturns, StepEnd};
+use agent::{Actor, AnyLearner, Batch, Mode, NStepReturns, PolicyStack, StepEnd};
 use anyhow::{Context, Result};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -24,6 +24,8 @@ pub struct Trainer {
     eval_env: Box<dyn Environment>,
     learner: AnyLearner,
     actor: Actor,
+    /// The frozen levels the actor acts through (empty for one level), embedded in checkpoints.
+    frozen: PolicyStack,
     replay: ReplayBuffer,
     /// Builds the stored transitions (n-step ones with `[agent] n_step` > 1).
     n_step: NStepReturns,
@@ -58,7 +60,10 @@ impl Trainer {
         let eval_env = task.make(seed + 3)?;
         let learner = AnyLearner::new(config.agent.clone(), seed, config.train.backend)?;
         tracing::info!(backend = ?learner.backend(), "learner");
-        let mut actor = learner.actor(seed + 1)?;
+        let levels = config.hierarchy.read().map_err(anyhow::Error::msg)?;
+        let frozen = PolicyStack::from_weights(&levels)?;
+        let mut actor =
+            Actor::with_stack(config.agent.clone(), PolicyStack::from_weights(&levels)?, seed + 1)?;
         actor.load(&learner.snapshot()?)?;
         let replay = ReplayBuffer::new(config.replay.clone(), config.dims())?;
         let observation = to_f32(&env.reset(Some(seed + 2)));
@@ -69,6 +74,7 @@ impl Trainer {
             eval_env,
             learner,
             actor,
+            frozen,
             replay,
             n_step,
             rng: StdRng::seed_from_u64(seed + 4),
@@ -83,9 +89,15 @@ impl Trainer {
         })
     }
 
-    /// The learner (for checkpoints and snapshots).
+    /// The learner.
+    #[cfg(test)]
     pub fn learner(&self) -> &AnyLearner {
         &self.learner
+    }
+
+    /// The learner's checkpoint, with the frozen levels embedded in a hierarchy.
+    pub fn checkpoint(&self) -> Result<agent::Checkpoint> {
+        Ok(self.frozen.embed(&self.learner.checkpoint()?)?)
     }
 
     /// The replay buffer (for its counters).
@@ -236,6 +248,7 @@ mod tests {
                 ..AgentConfig::default()
             },
             replay: ReplayConfig { capacity_transitions: 1000, mode, ..ReplayConfig::default() },
+            hierarchy: node::HierarchyKeys::default(),
         }
         .fitted()
         .unwrap()
@@ -268,6 +281,32 @@ mod tests {
         assert!(
             trainer.replay().priority_stats().unwrap().max > trainer.replay().priority_stats().unwrap().min
         );
+    }
+
+    #[test]
+    fn a_second_level_trains_through_the_frozen_first_and_checkpoints_it() {
+        let mut low = Trainer::new(tiny(SamplingMode::Uniform)).unwrap();
+        low.run_epoch().unwrap();
+        let dir = std::env::temp_dir().join(format!("sac-lsp-train-hierarchy-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let low_path = dir.join("low.safetensors");
+        std::fs::write(&low_path, low.checkpoint().unwrap().safetensors).unwrap();
+        let low_hash =
+            PolicyStack::from_weights(&[std::fs::read(&low_path).unwrap()]).unwrap().content_hash().unwrap();
+
+        let mut config = tiny(SamplingMode::Uniform);
+        config.hierarchy.levels = vec![low_path];
+        config.agent = AgentConfig { obs_dim: 4, act_dim: 1, ..config.agent.level_above() };
+        let mut high = Trainer::new(config.fitted().unwrap()).unwrap();
+        let record = high.run_epoch().unwrap();
+        assert_eq!(record.updates, 201);
+        assert!(record.eval_length >= 1.0 && record.q_loss.is_finite());
+        let checkpoint = high.checkpoint().unwrap();
+        let tensors =
+            agent::ParamSnapshot { version: 0, safetensors: checkpoint.safetensors }.tensors().unwrap();
+        let frozen = PolicyStack::from_embedded(&tensors).unwrap();
+        assert_eq!(frozen.content_hash().unwrap(), low_hash, "the first level stayed frozen");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
