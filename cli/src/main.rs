@@ -7,7 +7,6 @@ use clap::{Parser, Subcommand};
 
 mod csv;
 mod eval;
-mod json;
 mod monitor;
 mod plot;
 mod rollout;

@@ -2,7 +2,10 @@
 //! and how many could not be decoded, so a version mismatch or a corrupt publisher shows on screen
 //! instead of as silently missing figures.
 
+use std::collections::BTreeMap;
 use std::fmt;
+
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 /// One subscription of the monitor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -42,6 +45,11 @@ impl Family {
     fn index(self) -> usize {
         self as usize
     }
+
+    /// The family named `name`, as [`as_str`](Self::as_str) spells it.
+    pub fn from_name(name: &str) -> Option<Family> {
+        Family::ALL.into_iter().find(|f| f.as_str() == name)
+    }
 }
 
 impl fmt::Display for Family {
@@ -70,6 +78,28 @@ impl FamilyCounts {
     /// The sum over all families.
     pub fn total(&self) -> u64 {
         self.counts.iter().sum()
+    }
+}
+
+/// As a JSON object keyed by family name, every family present.
+impl Serialize for FamilyCounts {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_map(Family::ALL.iter().map(|f| (f.as_str(), self.get(*f))))
+    }
+}
+
+/// From a JSON object keyed by family name; families it lacks count 0, names it does not know
+/// (a newer monitor's) are ignored.
+impl<'de> Deserialize<'de> for FamilyCounts {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let by_name = BTreeMap::<String, u64>::deserialize(deserializer)?;
+        let mut counts = FamilyCounts::default();
+        for (name, n) in by_name {
+            if let Some(family) = Family::from_name(&name) {
+                counts.counts[family.index()] = n;
+            }
+        }
+        Ok(counts)
     }
 }
 

@@ -6,17 +6,54 @@
 //! - `episode`: every finished executor episode, as it arrives.
 //! - `eval`: every learner evaluation, as it arrives.
 //!
-//! `elapsed_s` counts from the monitor's start; figures nobody has reported are `null`.
-//! `sac-lsp plot` reads these lines back (`crate::plot::input`).
+//! `elapsed_s` counts from the monitor's start; figures nobody has reported are `null` (and a field
+//! an older monitor did not write reads as `null`). [`Record`] is the one definition: the monitor
+//! writes it and `sac-lsp plot` reads it back (`crate::plot::input`).
 
 use proto::{EpisodeReport, EvalReport};
+use serde::{Deserialize, Serialize};
 
-use super::family::Family;
 use super::tick::{Now, Tick};
-use crate::json::{Object, Value};
+
+/// One line of the record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum Record {
+    /// The monitor (re)started.
+    Start(StartRecord),
+    /// One interval's summary.
+    Tick(Tick),
+    /// A finished executor episode.
+    Episode(EpisodeRecord),
+    /// A learner evaluation.
+    Eval(EvalRecord),
+}
+
+impl Record {
+    /// The JSON line (no newline).
+    pub fn to_json(&self) -> String {
+        // Every field is a number, string, bool, list or string-keyed map: this cannot fail.
+        serde_json::to_string(self).expect("a record serializes")
+    }
+
+    /// Parses one line.
+    pub fn parse(line: &str) -> serde_json::Result<Record> {
+        serde_json::from_str(line)
+    }
+
+    /// When it was written, Unix milliseconds.
+    pub fn unix_ms(&self) -> u64 {
+        match self {
+            Record::Start(r) => r.unix_ms,
+            Record::Tick(r) => r.now.unix_ms,
+            Record::Episode(r) => r.now.unix_ms,
+            Record::Eval(r) => r.now.unix_ms,
+        }
+    }
+}
 
 /// The first line of a monitor session.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StartRecord {
     /// When the monitor started, Unix milliseconds.
     pub unix_ms: u64,
@@ -24,125 +61,85 @@ pub struct StartRecord {
     pub run_id: String,
 }
 
-impl StartRecord {
-    /// The JSON line (no newline).
-    pub fn to_json(&self) -> String {
-        Object::new()
-            .with("type", "start")
-            .with("unix_ms", self.unix_ms)
-            .with("run_id", self.run_id.as_str())
-            .to_string()
-    }
-}
-
 /// One finished episode, with the run's total env steps when it arrived (the learning curve's x).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EpisodeRecord {
     /// When it arrived.
+    #[serde(flatten)]
     pub now: Now,
-    /// The report.
-    pub episode: EpisodeReport,
+    /// The executor that ran it.
+    pub executor_id: u32,
+    /// Its episode counter.
+    pub episode: u64,
+    /// Undiscounted return.
+    #[serde(rename = "return")]
+    pub episode_return: f64,
+    /// Steps.
+    pub length: u32,
+    /// Ended by termination (a fall), not by the time limit.
+    pub terminated: bool,
+    /// The executor's cumulative env steps at its end.
+    pub env_steps: u64,
     /// Sum over executors of their newest known env steps, this episode included.
     pub env_steps_total: Option<u64>,
+    /// The weights it acted with.
+    pub weights_version: u64,
 }
 
 impl EpisodeRecord {
-    /// The JSON line (no newline).
-    pub fn to_json(&self) -> String {
-        let e = &self.episode;
-        timed("episode", self.now)
-            .with("executor_id", e.executor_id)
-            .with("episode", e.episode)
-            .with("return", e.episode_return)
-            .with("length", e.length)
-            .with("terminated", e.terminated)
-            .with("env_steps", e.env_steps)
-            .with("env_steps_total", self.env_steps_total)
-            .with("weights_version", e.weights_version)
-            .to_string()
+    /// The line for `episode`, arrived at `now`.
+    pub fn new(now: Now, episode: &EpisodeReport, env_steps_total: Option<u64>) -> Self {
+        Self {
+            now,
+            executor_id: episode.executor_id,
+            episode: episode.episode,
+            episode_return: episode.episode_return,
+            length: episode.length,
+            terminated: episode.terminated,
+            env_steps: episode.env_steps,
+            env_steps_total,
+            weights_version: episode.weights_version,
+        }
     }
 }
 
-/// One learner evaluation.
-#[derive(Debug, Clone, PartialEq)]
+/// One learner evaluation: the [`EvalReport`]'s fields as they are named on the bus.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EvalRecord {
     /// When it arrived.
+    #[serde(flatten)]
     pub now: Now,
     /// The report.
+    #[serde(flatten)]
     pub eval: EvalReport,
     /// Sum over executors of their newest known env steps when it arrived.
     pub env_steps_total: Option<u64>,
 }
 
+impl StartRecord {
+    /// The JSON line (no newline).
+    pub fn to_json(&self) -> String {
+        Record::Start(self.clone()).to_json()
+    }
+}
+
+impl EpisodeRecord {
+    /// The JSON line (no newline).
+    pub fn to_json(&self) -> String {
+        Record::Episode(self.clone()).to_json()
+    }
+}
+
 impl EvalRecord {
     /// The JSON line (no newline).
     pub fn to_json(&self) -> String {
-        let e = &self.eval;
-        timed("eval", self.now)
-            .with("epoch", e.epoch)
-            .with("learner_step", e.learner_step)
-            .with("episodes", e.episodes)
-            .with("mean_return", e.mean_return)
-            .with("std_return", e.std_return)
-            .with("mean_length", e.mean_length)
-            .with("mode", e.mode.name())
-            .with("env_steps_total", self.env_steps_total)
-            .to_string()
+        Record::Eval(self.clone()).to_json()
     }
 }
 
 impl Tick {
     /// The JSON line (no newline).
     pub fn to_json(&self) -> String {
-        let executors: Vec<Value> = self
-            .executors
-            .iter()
-            .map(|row| {
-                Object::new()
-                    .with("id", row.id)
-                    .with("alive", row.alive)
-                    .with("env_steps", row.env_steps)
-                    .with("env_steps_per_s", row.env_steps_per_s)
-                    .with("weights_lag_steps", row.weights_lag_steps)
-                    .with("blocked", row.blocked)
-                    .into()
-            })
-            .collect();
-        let blocked: Vec<Value> = self
-            .blocked
-            .iter()
-            .map(|b| {
-                Object::new()
-                    .with("node", b.node.as_str())
-                    .with("what", b.what.as_str())
-                    .with("why", b.why.as_str())
-                    .with("since_ms", b.since_ms)
-                    .into()
-            })
-            .collect();
-        let losses = Object::new()
-            .with("q_loss", self.losses.q_loss)
-            .with("v_loss", self.losses.v_loss)
-            .with("policy_loss", self.losses.policy_loss);
-        let undecodable = Family::ALL.iter().fold(Object::new(), |object, family| {
-            object.with(family.as_str(), self.undecodable.get(*family))
-        });
-        timed("tick", self.now)
-            .with("learner_step", self.learner_step)
-            .with("weights_version", self.weights_version)
-            .with("updates_per_s", self.updates_per_s)
-            .with("replay_size", self.replay_size)
-            .with("env_steps_total", self.env_steps_total)
-            .with("env_steps_per_s_total", self.env_steps_per_s_total)
-            .with("executors", executors)
-            .with("losses", losses)
-            .with("blocked", blocked)
-            .with("undecodable", undecodable)
-            .to_string()
+        Record::Tick(self.clone()).to_json()
     }
-}
-
-/// An object starting with the fields every line has.
-fn timed(kind: &str, now: Now) -> Object {
-    Object::new().with("type", kind).with("unix_ms", now.unix_ms).with("elapsed_s", now.elapsed_s)
 }

@@ -79,7 +79,7 @@ impl MonitorState {
             self.recent_returns.pop_front();
         }
         self.recent_returns.push_back(episode.episode_return);
-        Some(EpisodeRecord { now, episode, env_steps_total: self.env_steps_total() })
+        Some(EpisodeRecord::new(now, &episode, self.env_steps_total()))
     }
 
     /// An [`EvalReport`] from `eval`: returns its record line.

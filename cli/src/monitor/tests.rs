@@ -8,7 +8,7 @@ use proto::{NodeId, Role, topics};
 
 use super::fixtures;
 use super::{MonitorArgs, watch};
-use crate::json::{self, Value};
+use serde_json::Value;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn records_what_a_run_publishes_and_plot_draws_it() {
@@ -62,7 +62,7 @@ async fn records_what_a_run_publishes_and_plot_draws_it() {
     session.close().await.unwrap();
 
     let text = std::fs::read_to_string(&out).unwrap();
-    let lines: Vec<Value> = text.lines().map(|l| json::parse(l).unwrap()).collect();
+    let lines: Vec<Value> = text.lines().map(|l| serde_json::from_str::<Value>(l).unwrap()).collect();
     let of_type = |t: &str| lines.iter().filter(|l| l.get("type").and_then(Value::as_str) == Some(t)).count();
     assert_eq!(lines[0].get("type").and_then(Value::as_str), Some("start"));
     assert_eq!(lines[0].get("run_id").and_then(Value::as_str), Some(fixtures::RUN));

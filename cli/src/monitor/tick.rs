@@ -1,10 +1,12 @@
 //! What the monitor computes every interval: the figures of the live view's first lines and of one
 //! `"tick"` record line. Plain data; [`super::state::MonitorState::tick`] fills it in.
 
+use serde::{Deserialize, Serialize};
+
 use super::family::FamilyCounts;
 
 /// The time an event or tick happened, as the monitor saw it. Passed in, so the state is sans-IO.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Now {
     /// Wall clock, Unix milliseconds.
     pub unix_ms: u64,
@@ -13,9 +15,10 @@ pub struct Now {
 }
 
 /// One interval's summary of the run. Every figure is `None` until some process has reported it.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Tick {
     /// When.
+    #[serde(flatten)]
     pub now: Now,
     /// The learner's gradient steps (its own report first, else the param server's global step).
     pub learner_step: Option<u64>,
@@ -41,7 +44,7 @@ pub struct Tick {
 }
 
 /// One executor as the monitor knows it.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ExecutorRow {
     /// Executor id.
     pub id: u32,
@@ -62,7 +65,7 @@ pub struct ExecutorRow {
 }
 
 /// The learner's loss figures.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Losses {
     /// `learner/q_loss`.
     pub q_loss: Option<f64>,
@@ -73,7 +76,7 @@ pub struct Losses {
 }
 
 /// Something a process said it is waiting on.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BlockedEntry {
     /// `<role>/<id>` of the reporting process.
     pub node: String,

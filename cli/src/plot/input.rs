@@ -6,7 +6,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 
-use crate::json::{self, Value};
+use crate::monitor::record::Record;
 
 /// A finished executor episode.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -66,35 +66,36 @@ pub fn read(path: &Path) -> Result<RunRecord> {
 pub fn parse_lines(text: &str) -> RunRecord {
     let mut record = RunRecord::default();
     for line in text.lines().filter(|l| !l.trim().is_empty()) {
-        match json::parse(line).ok().and_then(|v| add(&mut record, &v)) {
-            Some(()) => record.records += 1,
-            None => record.skipped += 1,
+        match Record::parse(line) {
+            Ok(line) => {
+                add(&mut record, &line);
+                record.records += 1;
+            }
+            Err(_) => record.skipped += 1,
         }
     }
     record
 }
 
-/// Adds one parsed line; `None` if it is not a record this reader knows.
-fn add(record: &mut RunRecord, line: &Value) -> Option<()> {
-    let unix_ms = line.get("unix_ms")?.as_u64()?;
-    let number = |key: &str| line.get(key).and_then(Value::as_f64);
-    match line.get("type")?.as_str()? {
-        "episode" => record.episodes.push(EpisodePoint {
+/// Adds one record line.
+fn add(record: &mut RunRecord, line: &Record) {
+    let unix_ms = line.unix_ms();
+    let total = |steps: Option<u64>| steps.map(|s| s as f64);
+    match line {
+        Record::Episode(e) => record.episodes.push(EpisodePoint {
             unix_ms,
-            episode_return: number("return")?,
-            env_steps_total: number("env_steps_total"),
+            episode_return: e.episode_return,
+            env_steps_total: total(e.env_steps_total),
         }),
-        "eval" => record.evals.push(EvalPoint {
+        Record::Eval(e) => record.evals.push(EvalPoint {
             unix_ms,
-            mean_return: number("mean_return")?,
-            env_steps_total: number("env_steps_total"),
+            mean_return: e.eval.mean_return,
+            env_steps_total: total(e.env_steps_total),
         }),
-        "tick" => record.ticks.push(TickPoint { unix_ms, updates_per_s: number("updates_per_s") }),
-        "start" => {}
-        _ => return None,
+        Record::Tick(t) => record.ticks.push(TickPoint { unix_ms, updates_per_s: t.updates_per_s }),
+        Record::Start(_) => {}
     }
     record.start_unix_ms = Some(record.start_unix_ms.map_or(unix_ms, |s| s.min(unix_ms)));
-    Some(())
 }
 
 #[cfg(test)]
@@ -139,5 +140,37 @@ mod tests {
                 TickPoint { unix_ms: at(2.0).unix_ms, updates_per_s: Some(612.5) },
             ]
         );
+    }
+
+    #[test]
+    fn records_written_before_serde_still_read() {
+        // Lines of docs/results/zen-lr2e3-s1-20min-monitor.jsonl.gz (the hand-written writer's; its
+        // executor rows lack policy_lag_steps and last_return).
+        let text = [
+            r#"{"type":"start","unix_ms":1796309907968,"run_id":"zen-lr2e3-s1"}"#,
+            r#"{"type":"tick","unix_ms":1796310006971,"elapsed_s":99.002,"learner_step":21815,"weights_version":21500,"updates_per_s":232.73757372315998,"replay_size":132755,"env_steps_total":133443,"env_steps_per_s_total":1095.7073870845352,"executors":[{"id":0,"alive":true,"env_steps":16597,"env_steps_per_s":144.77787223308044,"weights_lag_steps":0,"blocked":false}],"losses":{"q_loss":2.38,"v_loss":null,"policy_loss":null},"blocked":[],"undecodable":{"stats":0,"episodes":0,"eval":0,"step":0,"barrier":0,"liveliness":0}}"#,
+            r#"{"type":"episode","unix_ms":1796309957174,"elapsed_s":49.205,"executor_id":3,"episode":18,"return":240.32931323551884,"length":1000,"terminated":false,"env_steps":8927,"env_steps_total":70933,"weights_version":10000}"#,
+            r#"{"type":"eval","unix_ms":1796309966682,"elapsed_s":58.713,"epoch":10,"learner_step":10000,"episodes":5,"mean_return":143.8570462792191,"std_return":164.01479984885276,"mean_length":284.8,"mode":"zero_latent","env_steps_total":81747}"#,
+        ]
+        .join("\n");
+        let record = parse_lines(&text);
+        assert_eq!((record.records, record.skipped), (4, 0));
+        assert_eq!(record.ticks[0].updates_per_s, Some(232.73757372315998));
+        assert_eq!(record.episodes[0].episode_return, 240.32931323551884);
+        assert_eq!(record.evals[0].env_steps_total, Some(81747.0));
+        // And every line reads back into the one record definition, field for field.
+        for line in text.lines() {
+            let parsed = Record::parse(line).unwrap();
+            let again: serde_json::Value = serde_json::from_str(&parsed.to_json()).unwrap();
+            let original: serde_json::Value = serde_json::from_str(line).unwrap();
+            for (key, value) in original.as_object().unwrap() {
+                // Integers come back as floats where the struct holds f64; rows gain the new nulls.
+                let same = match (value.as_f64(), again[key].as_f64()) {
+                    (Some(a), Some(b)) => a == b,
+                    _ => key == "executors" || again[key] == *value,
+                };
+                assert!(same, "{key}: {value} became {}", again[key]);
+            }
+        }
     }
 }
