@@ -22,7 +22,7 @@
 //! and prints `default ant-v5 fused, batch <B>: <N> updates/s, <M> sampled transitions/s`.
 //!
 //! FLOPs are counted from the layer shapes, 2 FLOP per multiply-add:
-//! * nominal (PyTorch-style, as `shared/reference/stack.md` counts): every layer evaluation the
+//! * nominal (PyTorch-style, as PyTorch benchmarks count): every layer evaluation the
 //!   candle update runs costs 2 per MAC forward, and each one on the differentiated path another
 //!   4 per MAC backward (weight and input gradients);
 //! * executed: the GEMMs the fused update actually runs (shared observation product, no input

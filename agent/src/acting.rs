@@ -14,10 +14,12 @@ use crate::stack::PolicyStack;
 /// How the trained level picks its latent.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Mode {
-    /// A fresh z ~ N(0, I) every step: the stochastic policy used for data collection (§1.4).
+    /// A fresh z ~ N(0, I) every step: the stochastic policy used for data collection
+    /// (`docs/sac-lsp.md` §12).
     Explore,
-    /// The fixed latent h drawn when the actor was made (or last redrawn): evaluation mode (§1.2
-    /// item 6). The "MAP" candidate selection of the original is degenerate and is not reproduced.
+    /// The fixed latent h drawn when the actor was made (or last redrawn): evaluation mode
+    /// (`docs/sac-lsp.md` §1). The "MAP" candidate selection of the original is degenerate and is not
+    /// reproduced.
     Deterministic,
 }
 
@@ -142,7 +144,7 @@ impl Actor {
 
     /// Signed TD errors delta = scale r + (1 - d) gamma V-bar(s') - Q1(s, a) with the loaded weights:
     /// the same formula as [`UpdateOutput::td_errors`](crate::UpdateOutput::td_errors), for an
-    /// executor's initial priorities (§2.2).
+    /// executor's initial priorities (`docs/sac-lsp.md` §10).
     pub fn td_errors(&self, batch: &Batch) -> Result<Vec<f32>> {
         let b = BatchTensors::new(batch, &self.cfg)?;
         Ok(q_regression(&self.nets, &self.cfg, &b)?.td_errors.to_vec1()?)

@@ -80,7 +80,7 @@ impl BatchTensors {
 }
 
 /// The Q regression of a batch: y_q (Eq. 2.25 with reward scale), each Q's Q(s, a), and the signed
-/// TD errors y_q - Q1(s, a) that prioritized replay uses (§2.1, §2.2).
+/// TD errors y_q - Q1(s, a) that prioritized replay uses (`docs/sac-lsp.md` §8, §10).
 #[derive(Debug)]
 pub(crate) struct QRegression {
     pub target: Tensor,

@@ -1,14 +1,15 @@
 //! [`AgentConfig`]: network shapes and hyperparameters, defaulting to the dissertation's baseline.
 //!
 //! Defaults are the values of `haarnoja/sac` at ca39be1 for the Ant (`examples/variants.py`, 'ant'),
-//! the code the dissertation ran; see `shared/reference/seed-impl.md` §1. The three options beyond the
+//! the code the dissertation ran; see `docs/sac-lsp.md` §12. The three options beyond the
 //! paper (reparameterised gradient, twin Q, learned temperature) are off by default.
 
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 
-/// The prior p(a) of the action prior term log p(a) in the V target and policy loss (§1.3).
+/// The prior p(a) of the action prior term log p(a) in the V target and policy loss
+/// (`docs/sac-lsp.md` §5).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ActionPrior {
@@ -136,7 +137,8 @@ impl AgentConfig {
         Self { obs_dim, act_dim, ..Self::default() }
     }
 
-    /// The configuration of a level trained on top of this one (§1.5): its action is this level's
+    /// The configuration of a level trained on top of this one (`docs/sac-lsp.md` §9): its action is
+    /// this level's
     /// latent h (same dimension, unbounded: no squash), with the N(0, I) action prior on h, a linear
     /// embedding output, and the paper's high-level reward scale 3. Other settings are kept.
     pub fn level_above(&self) -> Self {

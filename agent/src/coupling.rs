@@ -1,5 +1,5 @@
-//! One conditional affine coupling layer of the real-NVP bijector (§1.2 item 3; Dinh et al. 2017,
-//! "Density estimation using Real NVP", §3.2-3.3).
+//! One conditional affine coupling layer of the real-NVP bijector (`docs/sac-lsp.md` §1; Dinh et al. 2017,
+//! "Density estimation using Real NVP", sections 3.2-3.3).
 //!
 //! x = [A, B], A = x[..D/2], B = x[D/2..]. The odd layer keeps B and maps A' = A * exp(s([B, c])) +
 //! t([B, c]); the even layer keeps A and maps B' likewise. s and t are separate MLPs on the

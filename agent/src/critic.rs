@@ -1,4 +1,5 @@
-//! The critics (§1.1): Q(s, a) and V(s), each hidden ReLU layers and a linear scalar output.
+//! The critics (`docs/sac-lsp.md` §11): Q(s, a) and V(s), each hidden ReLU layers and a linear scalar
+//! output.
 //!
 //! Q's first layer has separate weight matrices `layer0.weight_observation` and
 //! `layer0.weight_action` (`MLPFunction`'s multi-input layer). Outputs are squeezed to `[batch]`.

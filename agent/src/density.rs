@@ -1,4 +1,4 @@
-//! Log-densities of the latent-space policy (§1.2 of the seed spec): the latent prior, the tanh
+//! Log-densities of the latent-space policy (`docs/sac-lsp.md` §1): the latent prior, the tanh
 //! squash correction, and the action prior. Each takes `[batch, dim]` and returns `[batch]`.
 
 use candle_core::{Result, Tensor};
@@ -8,7 +8,7 @@ use crate::config::ActionPrior;
 /// Epsilon inside the squash correction, as `latent_space_policy.py` adds it.
 pub const SQUASH_EPSILON: f64 = 1e-6;
 
-/// log N(x; 0, I) = -|x|^2 / 2 - (D / 2) log(2 pi): the latent prior p(z) (§1.2 item 2), also the
+/// log N(x; 0, I) = -|x|^2 / 2 - (D / 2) log(2 pi): the latent prior p(z) (`docs/sac-lsp.md` §1), also the
 /// 'normal' action prior.
 pub fn standard_normal_log_density(x: &Tensor) -> Result<Tensor> {
     let d = x.dim(1)? as f64;
@@ -16,19 +16,20 @@ pub fn standard_normal_log_density(x: &Tensor) -> Result<Tensor> {
 }
 
 /// sum_j log(1 - tanh(y_j)^2 + eps): log |det da/dy| of the squash a = tanh(y), with the code's
-/// epsilon (§1.2 item 4); subtracted from the pre-squash log-density.
+/// epsilon (`docs/sac-lsp.md` §1); subtracted from the pre-squash log-density.
 pub fn tanh_log_det_jacobian(y: &Tensor) -> Result<Tensor> {
     y.tanh()?.sqr()?.affine(-1.0, 1.0 + SQUASH_EPSILON)?.log()?.sum(1)
 }
 
 /// log pi(a|s) = log N(z) - log|det df/dz| - (if squashing) sum_j log(1 - tanh(y_j)^2 + eps): the change of
-/// variables through the bijector y = f(z; c) and the squash (§1.2 item 4).
+/// variables through the bijector y = f(z; c) and the squash (`docs/sac-lsp.md` §1).
 pub fn policy_log_density(z: &Tensor, bijector_log_det: &Tensor, y: &Tensor, squash: bool) -> Result<Tensor> {
     let log_py = (standard_normal_log_density(z)? - bijector_log_det)?;
     if squash { log_py - tanh_log_det_jacobian(y)? } else { Ok(log_py) }
 }
 
-/// log p(a) of the action prior (§1.3): N(0, I) on the action the Q net sees (squashed if the level
+/// log p(a) of the action prior (`docs/sac-lsp.md` §5): N(0, I) on the action the Q net sees (squashed
+/// if the level
 /// squashes, the latent h for a higher level), or 0 for the uniform prior.
 pub fn action_prior_log_density(prior: ActionPrior, action: &Tensor) -> Result<Tensor> {
     match prior {

@@ -1,4 +1,5 @@
-//! [`Learner`]: one SAC-LSP update (§1.3) over a [`Batch`], reading top to bottom like the paper.
+//! [`Learner`]: one SAC-LSP update (`docs/sac-lsp.md` §2-§7) over a [`Batch`], reading top to bottom
+//! like the paper.
 //!
 //! All losses are computed from one forward state with the pre-update parameters; their sum is
 //! differentiated once (the losses touch disjoint parameter sets, so each network receives exactly
@@ -116,8 +117,8 @@ pub struct Learner {
 }
 
 impl Learner {
-    /// Builds and initialises every network from `seed` (§1.1, §1.2). As in `sac.py`, V-bar is
-    /// Xavier-initialised on its own and then receives one soft update towards V, not a copy (§1.3).
+    /// Builds and initialises every network from `seed` (`docs/sac-lsp.md` §11). As in `sac.py`, V-bar
+    /// is Xavier-initialised on its own and then receives one soft update towards V, not a copy.
     pub fn new(cfg: AgentConfig, seed: u64) -> Result<Self> {
         cfg.validate()?;
         let nets = Networks::new(&cfg, seed, DType::F32)?;
@@ -173,13 +174,15 @@ impl Learner {
         Ok(Tensor::from_vec(z, (rows, self.cfg.act_dim), &Device::Cpu)?)
     }
 
-    /// One simultaneous update of every network from `batch` (§1.3), then V-bar <- (1 - tau) V-bar + tau V.
+    /// One simultaneous update of every network from `batch` (`docs/sac-lsp.md` §2-§7), then
+    /// V-bar <- (1 - tau) V-bar + tau V.
     pub fn update(&mut self, batch: &Batch) -> Result<UpdateOutput> {
         let cfg = &self.cfg;
         let b = BatchTensors::new(batch, cfg)?;
         let alpha = self.temperature.alpha()?;
 
-        // Q: regress Q(s, a) on y_q = scale r + (1 - d) gamma V-bar(s') (Eq. 2.25), IS-weighted (§2.1).
+        // Q: regress Q(s, a) on y_q = scale r + (1 - d) gamma V-bar(s') (Eq. 2.25), IS-weighted
+        // (`docs/sac-lsp.md` §8).
         let reg = q_regression(&self.nets, cfg, &b)?;
         let q_losses = reg
             .q_values
@@ -187,7 +190,7 @@ impl Learner {
             .map(|q| q_loss(q, &reg.target, b.is_weights.as_ref()))
             .collect::<candle_core::Result<Vec<_>>>()?;
 
-        // Policy samples a~ and log pi(a~|s) (§1.2 items 4-5).
+        // Policy samples a~ and log pi(a~|s) (`docs/sac-lsp.md` §1).
         let policy = &self.nets.policy.model;
         let context = policy.embed(&b.observations)?;
         let z = self.latent_noise(batch.size)?;

@@ -1,6 +1,6 @@
 //! SAC-LSP (Soft Actor-Critic with Latent Space Policies; Haarnoja et al. 2018, arXiv 1804.02808)
-//! in candle, sans-IO: no transport, no simulator. The spec is `shared/reference/seed-impl.md` §1
-//! (`haarnoja/sac` at ca39be1, the code behind the dissertation) and §2.1 for prioritized replay.
+//! in candle, sans-IO: no transport, no simulator. `docs/sac-lsp.md` states the maths and
+//! where each equation is computed (`haarnoja/sac` at ca39be1 is the code behind the dissertation).
 //!
 //! # Layout
 //!

@@ -1,5 +1,6 @@
 //! The SAC-LSP losses, one function per formula, as `sac/algos/sac.py` @ca39be1 computes them
-//! (seed spec §1.3). Equation numbers are the dissertation's (chapter 2). Every input is `[batch]`;
+//! (`docs/sac-lsp.md` §2-§7). Equation numbers are the dissertation's (chapter 2). Every input is
+//! `[batch]`;
 //! targets are detached here, so each loss trains only the network it names.
 //!
 //! The temperature alpha multiplies the entropy and action-prior terms. With the paper's settings
@@ -20,13 +21,15 @@ pub fn q_target(
     Ok((rewards.affine(scale_reward, 0.0)? + next_value.mul(&continuing)?)?.detach())
 }
 
-/// Signed TD error delta = y_q - Q(s, a) (§2.1): the priority signal of prioritized replay.
+/// Signed TD error delta = y_q - Q(s, a) (`docs/sac-lsp.md` §8): the priority signal of prioritized
+/// replay.
 pub fn td_error(q_target: &Tensor, q: &Tensor) -> Result<Tensor> {
     q_target.sub(&q.detach())
 }
 
 /// J_Q = 0.5 mean(w * (y_q - Q(s, a))^2): Eq. 2.25, with the importance-sampling weights w of
-/// Eq. 2.32 when the batch came from prioritized replay (only the Q loss is weighted, §2.1).
+/// Eq. 2.32 when the batch came from prioritized replay (only the Q loss is weighted,
+/// `docs/sac-lsp.md` §8).
 pub fn q_loss(q: &Tensor, q_target: &Tensor, is_weights: Option<&Tensor>) -> Result<Tensor> {
     let sq = q_target.detach().sub(q)?.sqr()?;
     let sq = match is_weights {
@@ -49,8 +52,8 @@ pub fn v_loss(v: &Tensor, v_target: &Tensor) -> Result<Tensor> {
 }
 
 /// Likelihood-ratio policy loss L = mean(log pi(a~|s) * sg(alpha log pi - Q(s, a~) + V(s) - alpha log p(a~))):
-/// its gradient is Eq. 2.27's estimator, with the code's sign of V (the text's "- V" is a typo, §2.5
-/// item 6) and the action prior. `log_pi` must carry the policy's gradient with a~ held fixed.
+/// its gradient is Eq. 2.27's estimator, with the code's sign of V (the text's "- V" is a typo,
+/// `docs/sac-lsp.md` §4) and the action prior. `log_pi` must carry the policy's gradient with a~ held fixed.
 pub fn likelihood_ratio_policy_loss(
     log_pi: &Tensor,
     q_pi: &Tensor,

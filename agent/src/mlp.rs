@@ -1,4 +1,4 @@
-//! Fully connected layers and MLPs, initialised as `haarnoja/sac` does (§1.1).
+//! Fully connected layers and MLPs, initialised as `haarnoja/sac` does (`docs/sac-lsp.md` §11).
 //!
 //! Weights are Xavier/Glorot-uniform with limit sqrt(6 / (fan_in + fan_out)). A multi-input first
 //! layer (`MLPFunction` in `sac/misc/mlp.py`) has one weight matrix per input, each Xavier-initialised

@@ -1,4 +1,4 @@
-//! The latent-space policy (§1.2): a = tanh(f(z; E(s))), z ~ N(0, I), f a real-NVP bijector
+//! The latent-space policy (`docs/sac-lsp.md` §1): a = tanh(f(z; E(s))), z ~ N(0, I), f a real-NVP bijector
 //! conditioned on the observation embedding c = E(s).
 //!
 //! Parameters: `embedding.layer{k}.*`, `coupling{i}.{scale,translation}.layer{k}.*`. The latent z
@@ -137,7 +137,7 @@ impl LatentPolicy {
 
     /// log pi(a|s) of given pre-squash actions y through the inverse pass:
     /// log N(f^-1(y)) + log|det df^-1/dy| - squash correction. Differentiating this with y held fixed
-    /// is what the likelihood-ratio gradient needs (§1.2 item 5).
+    /// is what the likelihood-ratio gradient needs (`docs/sac-lsp.md` §4).
     pub fn log_prob_embedded(&self, context: &Tensor, pre_squash: &Tensor) -> Result<Tensor> {
         let inv = self.bijector_inverse(pre_squash, context)?;
         // policy_log_density subtracts a forward log-det; the inverse one is its negation.
@@ -149,8 +149,8 @@ impl LatentPolicy {
         self.log_prob_embedded(&self.embed(obs)?, pre_squash)
     }
 
-    /// Deterministic mode: a = tanh(f(h; E(s))) for a latent h held fixed by the caller (§1.2 item 6),
-    /// or given by the level above in a stack (§1.5).
+    /// Deterministic mode: a = tanh(f(h; E(s))) for a latent h held fixed by the caller
+    /// (`docs/sac-lsp.md` §1), or given by the level above in a stack (§9).
     pub fn deterministic(&self, obs: &Tensor, h: &Tensor) -> Result<Tensor> {
         let y = self.bijector_forward(h, &self.embed(obs)?)?.output;
         self.squashed(&y)

@@ -1,4 +1,4 @@
-//! [`PolicyStack`]: frozen lower levels of a hierarchy (§1.5).
+//! [`PolicyStack`]: frozen lower levels of a hierarchy (`docs/sac-lsp.md` §9).
 //!
 //! Level k + 1 is an ordinary SAC-LSP level ([`AgentConfig::level_above`]) whose action is level k's
 //! latent h. Acting maps an observation through the top (trained) level to h, then through each

@@ -32,7 +32,8 @@ def main():
     base = load(table_id, "sac-lsp", "eval")
     print(f"# Table 5.4 on {task}, {updates:,} learner updates per row\n")
     print(f"`deploy/experiments/table.sh {'rllab' if paper else 'v5'}` with UPDATES={updates}, TABLE_ID={table_id}.")
-    print("Each row's final checkpoint evaluated by `sac-lsp eval --seed 0` on 200 episodes: with the paper's")
+    episodes = base["episodes"] if base else "the same"
+    print(f"Each row's final checkpoint evaluated by `sac-lsp eval --seed 0` on {episodes} episodes: with the paper's")
     print("fixed latent (one h ~ N(0, I) for every episode, so the figure hangs on one draw) and with h = 0.")
     print(f"2L: the low level is the distributed row's checkpoint at {updates * 3 // 5:,} updates, the high level")
     print(f"trained {updates * 2 // 5:,} more (its train minutes are the high level's).\n")

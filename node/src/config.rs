@@ -41,7 +41,7 @@ impl Default for RunKeys {
     }
 }
 
-/// The `[hierarchy]` table: a level trained on top of frozen, already trained levels (§1.5).
+/// The `[hierarchy]` table: a level trained on top of frozen, already trained levels (`docs/sac-lsp.md` §9).
 #[derive(Debug, Clone, Default, PartialEq, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct HierarchyKeys {

@@ -35,7 +35,7 @@ impl std::fmt::Display for Dims {
 }
 
 /// Configuration of a [`ReplayBuffer`]. `Default` gives the values of the prioritized SAC-LSP runs
-/// (`sac-prior`, seed-impl §2.1), with the β precedence bug fixed.
+/// (`sac-prior`, `docs/sac-lsp.md` §8), with the β precedence bug fixed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ReplayConfig {

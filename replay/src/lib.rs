@@ -3,7 +3,7 @@
 //! RNG, so every run is reproducible.
 //!
 //! Proportional prioritization as in Schaul et al. 2016 ("Prioritized Experience Replay") and the
-//! dissertation's `sac-prior` code (seed-impl §2.1): p = (|δ| + ε)^α, P(i) = p_i / Σp, stratified
+//! dissertation's `sac-prior` code (`docs/sac-lsp.md` §8): p = (|δ| + ε)^α, P(i) = p_i / Σp, stratified
 //! sampling over k equal segments, IS weights (N·P(i))^−β normalised by the batch maximum, β annealed
 //! linearly (without the original's jump to 1.4), new transitions at the maximum priority.
 //!

@@ -1,7 +1,7 @@
 //! The importance-sampling exponent β, annealed linearly over learner steps.
 //!
 //! The paper's code computed the per-epoch increment as `0.6 / n_epochs + 1` (operator precedence)
-//! and so jumped from 0.4 to about 1.4 after the first epoch (seed-impl §2.1). Here β is a pure
+//! and so jumped from 0.4 to about 1.4 after the first epoch (`docs/sac-lsp.md` §8). Here β is a pure
 //! function of the learner step, clamped so that it never passes `end`.
 
 /// Linear β schedule: `start` at step 0, `end` at `anneal_steps` and after.

@@ -7,7 +7,7 @@ result it prints checks the project's evaluator and environment too.
         [--env Ant-v5] [--seed 0] [--json OUT]
 
 CHECKPOINT is a learner checkpoint or weights snapshot (safetensors with `policy.*` tensors).
-The policy is read from the tensor names alone (seed spec §1.2): an MLP embedding c = E(s) (ReLU
+The policy is read from the tensor names alone (`docs/sac-lsp.md` §1): an MLP embedding c = E(s) (ReLU
 hidden; the output ReLU unless --linear-embedding-output), then real-NVP coupling layers in index
 order (layer i even: moves x[:D/2] conditioned on [x[D/2:], c]; odd: moves x[D/2:] conditioned on
 [x[:D/2], c]; x_M <- x_M exp(s(u)) + t(u), s and t tanh-hidden, linear-output MLPs), then a = tanh(y).

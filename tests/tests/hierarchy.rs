@@ -1,4 +1,5 @@
-//! A 2-level hierarchy across the roles (§1.5), tiny networks on the real Ant: the param server
+//! A 2-level hierarchy across the roles (`docs/sac-lsp.md` §9), tiny networks on the real Ant: the param
+//! server
 //! serves the frozen level, executors act through it and store the trained level's latents h,
 //! the learner trains only the top level and embeds the frozen one in its checkpoints, and an
 //! executor that joins late, with no file of the frozen level, receives it over the bus.

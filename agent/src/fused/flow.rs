@@ -1,11 +1,11 @@
-//! The real-NVP bijector of the latent-space policy on the arena (seed spec §1.2 items 3-5): the
+//! The real-NVP bijector of the latent-space policy on the arena (`docs/sac-lsp.md` §1): the
 //! sampling pass y = f(z; c), the inverse pass z = f^-1(y; c) that log pi is evaluated through with
 //! y held fixed, and the likelihood-ratio gradient back through that inverse pass to the coupling
 //! nets and to the embedding c.
 //!
 //! Coupling layer l keeps columns K and moves columns M of x; its nets see u = [x_K, c]:
 //! forward x'_M = x_M exp(s(u)) + t(u); inverse x_M = (x'_M - t(u)) exp(-s(u)), log|det| = -sum s.
-//! log pi = log N(z) - sum_l sum_j s_lj - sum_j log(1 - tanh(y_j)^2 + eps) (§1.2 item 4).
+//! log pi = log N(z) - sum_l sum_j s_lj - sum_j log(1 - tanh(y_j)^2 + eps) (`docs/sac-lsp.md` §1).
 //!
 //! With the reparameterised gradient (an option beyond the paper) log pi comes from the sampling
 //! pass itself, z held fixed, and [`backward_sample`] differentiates y and log pi through it.

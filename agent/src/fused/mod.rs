@@ -3,8 +3,8 @@
 //! the Ant sizes; see `benches/update.rs`).
 //!
 //! Candle spends much of an update outside its matrix kernels: bias-gradient reductions, an
-//! allocation per op, unfused elementwise passes, Adam as a dozen tensor ops per array
-//! (`shared/reference/stack.md` §1). Here every parameter lives in one arena (`layout.rs`) with the
+//! allocation per op, unfused elementwise passes, Adam as a dozen tensor ops per array.
+//! Here every parameter lives in one arena (`layout.rs`) with the
 //! candle names, every intermediate in a workspace allocated once (`update.rs`), bias and
 //! activation are fused into one pass after each GEMM and the bias gradient into the
 //! activation-derivative pass (`dense.rs`), the bijector's sample, inverse and likelihood-ratio
@@ -200,7 +200,7 @@ impl FusedLearner {
         }
     }
 
-    /// One simultaneous update of every network from `batch` (§1.3), then
+    /// One simultaneous update of every network from `batch` (`docs/sac-lsp.md` §2-§7), then
     /// V-bar <- (1 - tau) V-bar + tau V: the maths of [`Learner::update`].
     pub fn update(&mut self, batch: &Batch) -> Result<UpdateOutput> {
         batch.validate(self.cfg.obs_dim, self.cfg.act_dim)?;

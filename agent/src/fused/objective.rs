@@ -1,5 +1,5 @@
 //! The per-transition part of the update: Q target, TD errors, the three losses and their
-//! gradients with respect to the network outputs (seed spec §1.3), in one pass over the rows.
+//! gradients with respect to the network outputs (`docs/sac-lsp.md` §2-§7), in one pass over the rows.
 //!
 //! Each value is rounded the way candle evaluates `losses.rs` and differentiates it: the scalar
 //! factors are candle's `affine` constants (f64 cast to f32), and the output gradients follow its

@@ -1,4 +1,4 @@
-//! The fused update: [`Learner::update`](crate::Learner::update)'s maths (seed spec §1.3) on the
+//! The fused update: [`Learner::update`](crate::Learner::update)'s maths (`docs/sac-lsp.md` §2-§7) on the
 //! arena, with every intermediate in a [`Workspace`] allocated once per batch size.
 //!
 //! Order of work (all from the pre-update parameters, as `sac.py`'s single `session.run`):

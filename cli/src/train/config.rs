@@ -1,5 +1,5 @@
 //! The `[train]` table: the single-machine loop of the dissertation's "SAC-LSP" and "Prioritized
-//! SAC-LSP" runs (seed-impl §1.4, §2.1). The same run file carries `[agent]` and `[replay]`.
+//! SAC-LSP" runs (`docs/sac-lsp.md` §12, §8). The same run file carries `[agent]` and `[replay]`.
 
 use agent::Backend;
 use serde::Deserialize;

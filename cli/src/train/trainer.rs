@@ -1,6 +1,6 @@
-//! The single-machine loop (seed-impl §1.4): each env step with the stochastic policy, one update per
+//! The single-machine loop (`docs/sac-lsp.md` §12): each env step with the stochastic policy, one update per
 //! step once the replay holds `min_replay_size` transitions, one deterministic evaluation episode per
-//! epoch. Prioritized replay (§2.1) when `[replay] mode = "prioritized"`: new transitions enter at the
+//! epoch. Prioritized replay (§8) when `[replay] mode = "prioritized"`: new transitions enter at the
 //! maximum priority, and each update sends back |δ| of its batch.
 
 use std::time::Instant;
