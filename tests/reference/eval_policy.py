@@ -6,7 +6,10 @@ result it prints checks the project's evaluator and environment too.
     python3 tests/reference/eval_policy.py CHECKPOINT [--episodes 20] [--latent zero|fixed|stochastic]
         [--env Ant-v5] [--seed 0] [--json OUT]
 
-CHECKPOINT is a learner checkpoint or weights snapshot (safetensors with `policy.*` tensors).
+CHECKPOINT is a learner checkpoint or weights snapshot (safetensors with `policy.*` tensors). A
+hierarchy's checkpoint also holds its frozen levels as `frozen.<k>.policy.*` (k = 0 env-facing): the
+trained level's output h (no tanh, linear embedding output) then drives each frozen level in turn,
+a = f_k(h; E_k(s)), with the tanh at level 0 only (`docs/sac-lsp.md` §9).
 The policy is read from the tensor names alone (`docs/sac-lsp.md` §1): an MLP embedding c = E(s) (ReLU
 hidden; the output ReLU unless --linear-embedding-output), then real-NVP coupling layers in index
 order (layer i even: moves x[:D/2] conditioned on [x[D/2:], c]; odd: moves x[D/2:] conditioned on
@@ -59,7 +62,8 @@ def mlp(layers, x, hidden, output):
 
 
 class Policy:
-    def __init__(self, tensors, linear_output):
+    def __init__(self, tensors, linear_output, squash=True):
+        self.squash = squash
         self.embedding = mlp_layers(tensors, "policy.embedding.")
         self.out_act = (lambda x: x) if linear_output else (lambda x: np.maximum(x, 0.0))
         idx = sorted({int(m.group(1)) for n in tensors for m in [re.match(r"policy\.coupling(\d+)\.", n)] if m})
@@ -85,7 +89,27 @@ class Policy:
             s = mlp(scale, u, np.tanh, lambda v: v)
             t = mlp(trans, u, np.tanh, lambda v: v)
             x[moved] = x[moved] * np.exp(s) + t
-        return np.tanh(x)
+        return np.tanh(x) if self.squash else x
+
+
+class Stack:
+    """The trained level on top of the frozen levels the checkpoint carries (none: a plain policy)."""
+
+    def __init__(self, tensors, linear_output):
+        self.frozen = []
+        while any(n.startswith(f"frozen.{len(self.frozen)}.") for n in tensors):
+            k = len(self.frozen)
+            level = {n[len(f"frozen.{k}.") :]: t for n, t in tensors.items() if n.startswith(f"frozen.{k}.")}
+            self.frozen.append(Policy(level, linear_output=k > 0, squash=k == 0))
+        top_linear = linear_output or bool(self.frozen)
+        self.top = Policy(tensors, top_linear, squash=not self.frozen)
+        self.obs_dim, self.act_dim = self.top.obs_dim, self.top.act_dim
+
+    def act(self, obs, z):
+        h = self.top.act(obs, z)
+        for level in reversed(self.frozen):
+            h = level.act(obs, h)
+        return h
 
 
 def main():
@@ -101,7 +125,7 @@ def main():
 
     import gymnasium as gym
 
-    policy = Policy(read_safetensors(args.checkpoint), args.linear_embedding_output)
+    policy = Stack(read_safetensors(args.checkpoint), args.linear_embedding_output)
     env = gym.make(args.env)
     assert env.observation_space.shape == (policy.obs_dim,), (env.observation_space.shape, policy.obs_dim)
     low, high = env.action_space.low, env.action_space.high
@@ -129,6 +153,7 @@ def main():
         "checkpoint": args.checkpoint,
         "env": args.env,
         "latent": args.latent,
+        "frozen_levels": len(policy.frozen),
         "episodes": args.episodes,
         "mean": float(r.mean()),
         "std": float(r.std()),
