@@ -40,20 +40,9 @@ pub(crate) async fn fetch_loop(mut f: Fetch) -> u64 {
         };
         if wanted {
             match fetch_weights(&f.bus, f.timeout).await {
-                Ok(Some(snapshot)) if snapshot.stack != f.stack => {
-                    // Trained on other levels below: its h would mean something else to ours.
-                    let name = ContentHash::describe;
-                    let detail = format!(
-                        "version {}: trained on {}, acting on {}",
-                        snapshot.version,
-                        name(snapshot.stack),
-                        name(f.stack)
-                    );
-                    crate::lock(&f.rejects).record(
-                        "weights/stack_mismatch",
-                        &detail,
-                        std::time::Instant::now(),
-                    );
+                Ok(Some(snapshot)) if let Some(detail) = snapshot.stack_mismatch(f.stack) => {
+                    let now = std::time::Instant::now();
+                    crate::lock(&f.rejects).record("weights/stack_mismatch", &detail, now);
                 }
                 Ok(Some(snapshot)) if held.is_none_or(|have| snapshot.version > have) => {
                     held = Some(snapshot.version);

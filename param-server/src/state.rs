@@ -113,15 +113,7 @@ impl State {
                 return false;
             }
         };
-        if snapshot.stack != self.stack {
-            // Weights of another hierarchy (or of none) would act on the wrong levels below.
-            let name = ContentHash::describe;
-            let detail = format!(
-                "version {}: trained on {}, this run serves {}",
-                snapshot.version,
-                name(snapshot.stack),
-                name(self.stack)
-            );
+        if let Some(detail) = snapshot.stack_mismatch(self.stack) {
             self.rejects.record("weights/stack_mismatch", &detail, Instant::now());
             return false;
         }

@@ -99,6 +99,21 @@ impl Message for FrozenLevels {
     }
 }
 
+impl WeightsSnapshot {
+    /// Why these weights do not fit a run acting through the frozen levels hashed `expected` (the
+    /// levels below would read their h as something else), or `None` when they do.
+    pub fn stack_mismatch(&self, expected: Option<ContentHash>) -> Option<String> {
+        (self.stack != expected).then(|| {
+            format!(
+                "version {}: trained on {}, this run acts on {}",
+                self.version,
+                ContentHash::describe(self.stack),
+                ContentHash::describe(expected)
+            )
+        })
+    }
+}
+
 impl Sealed for WeightsSnapshot {
     fn payload_size_hint(&self) -> usize {
         self.safetensors.len() + 64
