@@ -52,14 +52,7 @@ impl Actor {
     /// An actor whose trained level (`cfg`) sits on top of frozen `stack` levels.
     pub fn with_stack(cfg: AgentConfig, stack: PolicyStack, seed: u64) -> Result<Self> {
         cfg.validate()?;
-        if let Some((obs_dim, latent_dim)) = stack.top_dims()
-            && (obs_dim, latent_dim) != (cfg.obs_dim, cfg.act_dim)
-        {
-            return Err(Error::BadStack(format!(
-                "trained level has (obs {}, act {}), the top frozen level expects (obs {obs_dim}, act {latent_dim})",
-                cfg.obs_dim, cfg.act_dim
-            )));
-        }
+        stack.check_fits(&cfg)?;
         let nets = Networks::new(&cfg, seed, DType::F32)?;
         let mut rng = StdRng::seed_from_u64(seed);
         let fixed_latent = (0..cfg.act_dim).map(|_| rng.sample(StandardNormal)).collect();

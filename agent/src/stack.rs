@@ -19,7 +19,7 @@ use sha3::{Digest, Sha3_256};
 use crate::config::AgentConfig;
 use crate::error::{Error, Result};
 use crate::networks::{Net, policy_net};
-use crate::params::{Checkpoint, ParamSnapshot, decode, encode};
+use crate::params::{Checkpoint, ParamSnapshot, decode, encode, read_i64};
 use crate::policy::LatentPolicy;
 use crate::schema::{Schema, networks_from_schema, snapshot_schema};
 use crate::vars::SeededInit;
@@ -47,10 +47,7 @@ impl Level {
         let tensors = decode(bytes)?;
         let schema: Schema = tensors.iter().map(|(name, t)| (name.clone(), t.dims().to_vec())).collect();
         let config = networks_from_schema(&schema, &AgentConfig::default_at_level(index))?;
-        let version = match tensors.get("learner.step") {
-            Some(t) => t.flatten_all()?.to_vec1::<i64>()?.first().map_or(0, |&s| s.max(0) as u64),
-            None => 0,
-        };
+        let version = read_i64(&tensors, "learner.step").map_or(0, |step| step.max(0) as u64);
         Ok(Level { config, snapshot: ParamSnapshot { version, safetensors: bytes.to_vec() } })
     }
 }
@@ -186,6 +183,20 @@ impl PolicyStack {
             hasher.update(&bytes);
         }
         Ok(hasher.finalize().into())
+    }
+
+    /// Checks that a level of `cfg` can sit on top: it sees the same observations and its action is
+    /// as wide as the top frozen level's latent. An empty stack fits anything.
+    pub fn check_fits(&self, cfg: &AgentConfig) -> Result<()> {
+        if let Some((obs_dim, latent_dim)) = self.top_dims()
+            && (obs_dim, latent_dim) != (cfg.obs_dim, cfg.act_dim)
+        {
+            return Err(Error::BadStack(format!(
+                "trained level has (obs {}, act {}), the top frozen level expects (obs {obs_dim}, act {latent_dim})",
+                cfg.obs_dim, cfg.act_dim
+            )));
+        }
+        Ok(())
     }
 
     /// Number of frozen levels.

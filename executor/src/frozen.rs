@@ -9,9 +9,7 @@ use node::{Bus, Shutdown};
 use proto::{ContentHash, FrozenLevels, topics};
 
 use crate::lock;
-
-/// Wait between attempts while fetching fails.
-const RETRY: Duration = Duration::from_millis(500);
+use crate::weights::{FetchError, RETRY, query};
 
 /// The stack and its hash.
 #[derive(Debug)]
@@ -33,8 +31,8 @@ pub(crate) async fn fetch(
     let started = Instant::now();
     let mut said = Instant::now();
     loop {
-        match fetch_once(bus, timeout).await {
-            Ok(message) => match check(message, depth) {
+        match query::<FrozenLevels>(bus, &topics::params_frozen(bus.run()), timeout).await {
+            Ok(Some(message)) => match check(message, depth) {
                 Ok(fetched) => {
                     tracing::info!(levels = depth, content_hash = %fetched.hash, "frozen levels received");
                     return Some(fetched);
@@ -43,8 +41,12 @@ pub(crate) async fn fetch(
                     lock(rejects).record(&format!("frozen/{reason}"), &detail, Instant::now())
                 }
             },
-            Err(Failure::Decode(error)) => lock(rejects).decode_failed("frozen", &error),
-            Err(Failure::Unavailable(why)) => {
+            Err(FetchError::Decode(error)) => lock(rejects).decode_failed("frozen", &error),
+            unavailable => {
+                let why = match unavailable {
+                    Err(FetchError::Unavailable(why)) => why,
+                    _ => "no param server answered".to_string(),
+                };
                 if said.elapsed() >= deadline {
                     said = Instant::now();
                     let waited_s = started.elapsed().as_secs();
@@ -73,26 +75,6 @@ fn check(message: FrozenLevels, depth: usize) -> Result<Fetched, (&'static str, 
         return Err(("hash_mismatch", detail));
     }
     Ok(Fetched { stack, hash })
-}
-
-enum Failure {
-    Decode(proto::DecodeError),
-    Unavailable(String),
-}
-
-async fn fetch_once(bus: &Bus, timeout: Duration) -> Result<FrozenLevels, Failure> {
-    let key = topics::params_frozen(bus.run());
-    let replies =
-        bus.session().get(&key).timeout(timeout).await.map_err(|e| Failure::Unavailable(e.to_string()))?;
-    match replies.recv_async().await {
-        Ok(reply) => match reply.result() {
-            Ok(sample) => proto::decode(&sample.payload().to_bytes()).map_err(Failure::Decode),
-            Err(error) => {
-                Err(Failure::Unavailable(String::from_utf8_lossy(&error.payload().to_bytes()).into()))
-            }
-        },
-        Err(_) => Err(Failure::Unavailable("no param server answered".into())),
-    }
 }
 
 #[cfg(test)]

@@ -12,8 +12,8 @@ use tokio::sync::watch;
 
 use crate::inbox::Inbox;
 
-/// Wait between attempts while fetching fails.
-const RETRY: Duration = Duration::from_millis(500);
+/// Wait between attempts while fetching fails (weights and frozen levels).
+pub(crate) const RETRY: Duration = Duration::from_millis(500);
 
 /// What the task needs.
 pub(crate) struct Fetch {
@@ -64,16 +64,25 @@ pub(crate) async fn fetch_loop(mut f: Fetch) -> u64 {
     }
 }
 
-enum FetchError {
+/// Why a query got no message.
+pub(crate) enum FetchError {
     Decode(proto::DecodeError),
     Unavailable(String),
 }
 
 /// One `get` of the latest weights.
 async fn fetch_weights(bus: &Bus, timeout: Duration) -> Result<Option<WeightsSnapshot>, FetchError> {
-    let key = topics::params_weights(bus.run());
+    query(bus, &topics::params_weights(bus.run()), timeout).await
+}
+
+/// One `get` on a param-server queryable: its first reply decoded, `None` if nobody replied.
+pub(crate) async fn query<M: proto::Message>(
+    bus: &Bus,
+    key: &str,
+    timeout: Duration,
+) -> Result<Option<M>, FetchError> {
     let replies =
-        bus.session().get(&key).timeout(timeout).await.map_err(|e| FetchError::Unavailable(e.to_string()))?;
+        bus.session().get(key).timeout(timeout).await.map_err(|e| FetchError::Unavailable(e.to_string()))?;
     match replies.recv_async().await {
         Ok(reply) => match reply.result() {
             Ok(sample) => proto::decode(&sample.payload().to_bytes()).map(Some).map_err(FetchError::Decode),

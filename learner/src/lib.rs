@@ -81,16 +81,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     let checkpoints = s.checkpoint_dir.as_ref().map(CheckpointDir::new);
     let levels = config.hierarchy.read().map_err(anyhow::Error::msg)?;
     let frozen = Frozen::new(PolicyStack::from_weights(&levels)?)?;
-    if let Some((obs_dim, latent_dim)) = frozen.stack.top_dims()
-        && (obs_dim, latent_dim) != (config.agent.obs_dim, config.agent.act_dim)
-    {
-        anyhow::bail!(
-            "[hierarchy] the top frozen level takes {obs_dim} observation values and a {latent_dim}-d latent, \
-             but the trained level ([agent] on the task) has {} and {}",
-            config.agent.obs_dim,
-            config.agent.act_dim
-        );
-    }
+    frozen.stack.check_fits(&config.agent).map_err(|e| anyhow::anyhow!("[hierarchy]: {e}"))?;
     if let Some(hash) = frozen.hash {
         tracing::info!(levels = levels.len(), content_hash = %hash, "training on top of frozen levels");
     }
