@@ -281,6 +281,7 @@ fn main() -> agent::Result<()> {
         println!("{line}");
     }
     println!("default ant-v5 fused / paper ant-v5 fused: ratio {:.2}", fused_median[1] / fused_median[0]);
+    critic_variants(&configs[2].1, threads, (warmup, runs, per_window))?;
     if let Ok(sizes) = std::env::var("UPDATE_BENCH_BATCHES") {
         let sizes: Vec<usize> = sizes.split(',').filter_map(|s| s.trim().parse().ok()).collect();
         batch_sweep(&configs[1].1, &sizes, threads, (warmup, runs, per_window))?;
@@ -288,6 +289,62 @@ fn main() -> agent::Result<()> {
     if let Ok(path) = std::env::var("UPDATE_BENCH_CHECKPOINT") {
         let default = &configs[1].1;
         trained_checkpoint(&path, default, threads, (warmup, runs, per_window))?;
+    }
+    Ok(())
+}
+
+/// The dissertation's other critics and inputs on the paper's rllab configuration, interleaved with
+/// its scalar critic: categorical soft C51 and the dissertation's categorical (candle: the fused
+/// learner implements the scalar critic only), and HER's goal-conditioned networks (a 14-d speed
+/// goal appended to the observation; fused).
+fn critic_variants(
+    cfg: &AgentConfig,
+    threads: usize,
+    (warmup, runs, per_window): (usize, usize, usize),
+) -> agent::Result<()> {
+    use agent::{AnyLearner, Backend, CategoricalConfig, CategoricalVariant, Critic};
+    let categorical = |variant| AgentConfig {
+        critic: Critic::Categorical,
+        categorical: CategoricalConfig { variant, ..CategoricalConfig::default() },
+        ..cfg.clone()
+    };
+    let variants = [
+        ("scalar critic, candle", cfg.clone(), Backend::Candle),
+        ("scalar critic, fused", cfg.clone(), Backend::Fused),
+        ("categorical soft_c51, candle", categorical(CategoricalVariant::SoftC51), Backend::Candle),
+        ("categorical dissertation, candle", categorical(CategoricalVariant::Dissertation), Backend::Candle),
+        (
+            "HER speed goal (obs + 14), fused",
+            AgentConfig { obs_dim: cfg.obs_dim + 14, ..cfg.clone() },
+            Backend::Fused,
+        ),
+    ];
+    println!("\ncritic variants on paper ant-rllab (batch {}), interleaved:", cfg.batch_size);
+    let mut rng = StdRng::seed_from_u64(3);
+    let mut learners = Vec::new();
+    for (name, cfg, backend) in variants {
+        let b = batch(&cfg, cfg.batch_size, &mut rng);
+        let mut learner = AnyLearner::new(cfg, 1, backend)?;
+        if let AnyLearner::Fused(f) = learner {
+            learner = AnyLearner::Fused(Box::new(f.with_threads(threads)));
+        }
+        for _ in 0..warmup {
+            learner.update(&b)?;
+        }
+        learners.push((name, learner, b, Vec::new()));
+    }
+    for _ in 0..runs {
+        for (_, learner, b, rates) in &mut learners {
+            rates.push(rate(1, per_window, threads == 1, || {
+                learner.update(b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
+            }));
+        }
+    }
+    let scalar = merge(&learners[0].3).wall.1;
+    for (name, _, _, rates) in &learners {
+        let r = merge(rates);
+        print_rate(name, r, None);
+        println!("    median ratio to the scalar critic on candle: {:.2}", r.wall.1 / scalar);
     }
     Ok(())
 }

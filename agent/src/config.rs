@@ -19,6 +19,52 @@ pub enum ActionPrior {
     Uniform,
 }
 
+/// Which critic Q and V are (`docs/sac-lsp.md` §13).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Critic {
+    /// A scalar output: the paper's critic.
+    #[default]
+    Scalar,
+    /// A categorical distribution over a fixed support ([`CategoricalConfig`]).
+    Categorical,
+}
+
+/// Which categorical formulation trains a categorical critic (`docs/sac-lsp.md` §13).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CategoricalVariant {
+    /// A distributional soft critic: C51's projection of the soft Bellman target, cross-entropy.
+    #[default]
+    SoftC51,
+    /// The dissertation's formulation as its code ran it (`sac-c51`), kept to reproduce its
+    /// negative result: a width-1 layer before the atoms' softmax and a squared loss on a
+    /// log-likelihood-like scalar.
+    Dissertation,
+}
+
+/// The support and formulation of a categorical critic. Defaults: the dissertation's 51 atoms on
+/// [-100, 5000] (its §4.3), in scaled-reward units (the units of Q and V), trained as
+/// [`CategoricalVariant::SoftC51`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CategoricalConfig {
+    /// The formulation. Default `soft_c51`.
+    pub variant: CategoricalVariant,
+    /// Number of atoms z_i = v_min + i (v_max - v_min) / (atoms - 1). Default 51.
+    pub atoms: usize,
+    /// The smallest atom. Default -100.
+    pub v_min: f32,
+    /// The largest atom. Default 5000.
+    pub v_max: f32,
+}
+
+impl Default for CategoricalConfig {
+    fn default() -> Self {
+        Self { variant: CategoricalVariant::SoftC51, atoms: 51, v_min: -100.0, v_max: 5000.0 }
+    }
+}
+
 /// The longest n-step return allowed: past it the uncorrected return is mostly off-policy rewards.
 pub const MAX_N_STEP: usize = 20;
 
@@ -97,6 +143,11 @@ pub struct AgentConfig {
     ///
     /// [`NStepReturns`]: crate::NStepReturns
     pub n_step: usize,
+    /// Option beyond the paper (the dissertation's first extension): the critic's kind. Default
+    /// [`Critic::Scalar`]; `categorical` uses the `[agent.categorical]` table.
+    pub critic: Critic,
+    /// The categorical critic's support and formulation, read when `critic = "categorical"`.
+    pub categorical: CategoricalConfig,
 }
 
 impl Default for AgentConfig {
@@ -127,6 +178,8 @@ impl Default for AgentConfig {
             initial_temperature: 1.0,
             target_entropy: None,
             n_step: 1,
+            critic: Critic::Scalar,
+            categorical: CategoricalConfig::default(),
         }
     }
 }
@@ -161,6 +214,21 @@ impl AgentConfig {
     /// spans n_step env steps.
     pub fn bootstrap_discount(&self) -> f32 {
         self.discount.powi(self.n_step as i32)
+    }
+
+    /// Widths of every layer of Q and V after their inputs: the hidden layers, then the output
+    /// layers of the critic's kind (one value; the atoms' logits; or the dissertation's width-1
+    /// layer and then the atoms' logits).
+    pub fn critic_layers(&self) -> Vec<usize> {
+        let mut layers = self.critic_hidden.clone();
+        match (self.critic, self.categorical.variant) {
+            (Critic::Scalar, _) => layers.push(1),
+            (Critic::Categorical, CategoricalVariant::SoftC51) => layers.push(self.categorical.atoms),
+            (Critic::Categorical, CategoricalVariant::Dissertation) => {
+                layers.extend([1, self.categorical.atoms])
+            }
+        }
+        layers
     }
 
     /// The target entropy actually used by the learned temperature.
@@ -231,6 +299,22 @@ impl AgentConfig {
         {
             return fail(format!("target_entropy must be finite, got {h}"));
         }
+        if self.critic == Critic::Categorical {
+            let c = &self.categorical;
+            if !(2..=1024).contains(&c.atoms) {
+                return fail(format!("categorical.atoms must be in [2, 1024], got {}", c.atoms));
+            }
+            if !(c.v_min.is_finite() && c.v_max.is_finite() && c.v_min < c.v_max) {
+                return fail(format!(
+                    "categorical.v_min must be finite and below a finite v_max, got [{}, {}]",
+                    c.v_min, c.v_max
+                ));
+            }
+            if self.twin_q {
+                // Clipped double Q takes a minimum of two values; of two distributions it is not defined.
+                return fail("twin_q is not implemented with a categorical critic".into());
+            }
+        }
         Ok(())
     }
 }
@@ -260,6 +344,30 @@ mod tests {
         assert!((three.bootstrap_discount() - 0.99f32.powi(3)).abs() < 1e-7);
     }
 
+    fn categorical(categorical: CategoricalConfig, twin_q: bool) -> AgentConfig {
+        AgentConfig { critic: Critic::Categorical, categorical, twin_q, ..Default::default() }
+    }
+
+    #[test]
+    fn critic_layers_end_in_the_heads_outputs() {
+        let scalar = AgentConfig::default();
+        assert_eq!(scalar.critic_layers(), vec![128, 128, 1]);
+        let c51 = categorical(CategoricalConfig::default(), false);
+        c51.validate().unwrap();
+        assert_eq!(c51.critic_layers(), vec![128, 128, 51]);
+        let old = CategoricalConfig { variant: CategoricalVariant::Dissertation, ..Default::default() };
+        assert_eq!(categorical(old, false).critic_layers(), vec![128, 128, 1, 51]);
+        // A run file's tables read into the same settings.
+        let parsed: AgentConfig = toml::from_str(
+            "critic = \"categorical\"\n[categorical]\nvariant = \"dissertation\"\natoms = 11\n",
+        )
+        .unwrap();
+        assert_eq!(
+            (parsed.critic, parsed.categorical.variant, parsed.categorical.atoms),
+            (Critic::Categorical, CategoricalVariant::Dissertation, 11)
+        );
+    }
+
     #[test]
     fn validate_names_the_bad_field() {
         let cases: Vec<(AgentConfig, &str)> = vec![
@@ -275,6 +383,10 @@ mod tests {
             (AgentConfig { batch_size: 0, ..Default::default() }, "batch_size"),
             (AgentConfig { n_step: 0, ..Default::default() }, "n_step"),
             (AgentConfig { n_step: 21, ..Default::default() }, "n_step"),
+            (categorical(CategoricalConfig { atoms: 1, ..Default::default() }, false), "categorical.atoms"),
+            (categorical(CategoricalConfig { v_min: 5.0, v_max: 5.0, ..Default::default() }, false), "v_min"),
+            (categorical(CategoricalConfig { v_max: f32::INFINITY, ..Default::default() }, false), "v_min"),
+            (categorical(CategoricalConfig::default(), true), "twin_q"),
             (AgentConfig { target_entropy: Some(f32::INFINITY), ..Default::default() }, "target_entropy"),
         ];
         for (cfg, field) in cases {

@@ -13,8 +13,9 @@ use rand_distr::StandardNormal;
 
 use crate::acting::Actor;
 use crate::batch::{Batch, BatchTensors, q_regression};
-use crate::config::AgentConfig;
+use crate::config::{AgentConfig, Critic};
 use crate::density::action_prior_log_density;
+use crate::distributional::{CriticLosses, PolicyTerms, categorical_losses};
 use crate::error::{Error, Result};
 use crate::losses::{
     likelihood_ratio_policy_loss, q_loss, reparameterized_policy_loss, temperature_loss, v_loss, v_target,
@@ -182,13 +183,9 @@ impl Learner {
         let alpha = self.temperature.alpha()?;
 
         // Q: regress Q(s, a) on y_q = scale r + (1 - d) gamma V-bar(s') (Eq. 2.25), IS-weighted
-        // (`docs/sac-lsp.md` §8).
+        // (`docs/sac-lsp.md` §8). With a categorical critic these are the distributions' means,
+        // which give the TD errors of the priorities whatever the critic.
         let reg = q_regression(&self.nets, cfg, &b)?;
-        let q_losses = reg
-            .q_values
-            .iter()
-            .map(|q| q_loss(q, &reg.target, b.is_weights.as_ref()))
-            .collect::<candle_core::Result<Vec<_>>>()?;
 
         // Policy samples a~ and log pi(a~|s) (`docs/sac-lsp.md` §1).
         let policy = &self.nets.policy.model;
@@ -207,17 +204,33 @@ impl Learner {
         let q_pi = q_pi.collect::<candle_core::Result<Vec<_>>>()?;
         let q_pi_min = q_pi.iter().skip(1).try_fold(q_pi[0].clone(), |m, q| m.minimum(q))?;
 
-        // V: regress V(s) on Q(s, a~) - alpha log pi + alpha log p (Eq. 2.23).
         let v = self.nets.v.model.forward(&b.observations)?;
-        let v_tgt = v_target(&q_pi_min, &log_pi, &log_prior, alpha)?;
-        let v_loss = v_loss(&v, &v_tgt)?;
+        let critic = match cfg.critic {
+            // V: regress V(s) on Q(s, a~) - alpha log pi + alpha log p (Eq. 2.23).
+            Critic::Scalar => {
+                let v_tgt = v_target(&q_pi_min, &log_pi, &log_prior, alpha)?;
+                let q_losses = reg
+                    .q_values
+                    .iter()
+                    .map(|q| q_loss(q, &reg.target, b.is_weights.as_ref()))
+                    .collect::<candle_core::Result<Vec<_>>>()?;
+                let policy_q = if cfg.reparameterize { q_pi_min.clone() } else { q_pi[0].clone() };
+                CriticLosses { q_losses, v_loss: v_loss(&v, &v_tgt)?, policy_q, policy_v: v.detach() }
+            }
+            // A distribution per critic (`docs/sac-lsp.md` §13).
+            Critic::Categorical => {
+                let terms = PolicyTerms { actions: &actions, log_pi: &log_pi, log_prior: &log_prior, alpha };
+                categorical_losses(&self.nets, cfg, batch, &b, &terms, &q_pi[0], &v)?
+            }
+        };
+        let CriticLosses { q_losses, v_loss, policy_q, policy_v } = critic;
 
         // Policy: likelihood ratio (Eq. 2.27, code's sign, with Q1) or, as an option,
         // reparameterised through min(Q1, Q2) (clipped double Q, as SAC's second version).
         let policy_loss = if cfg.reparameterize {
-            reparameterized_policy_loss(&log_pi, &q_pi_min, &log_prior, alpha)?
+            reparameterized_policy_loss(&log_pi, &policy_q, &log_prior, alpha)?
         } else {
-            likelihood_ratio_policy_loss(&log_pi, &q_pi[0], &v.detach(), &log_prior, alpha)?
+            likelihood_ratio_policy_loss(&log_pi, &policy_q, &policy_v, &log_prior, alpha)?
         };
 
         let mut total = (v_loss.clone() + policy_loss.clone())?;

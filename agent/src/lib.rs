@@ -11,7 +11,9 @@
 //! | `coupling.rs` | one conditional affine coupling layer (real NVP) |
 //! | `policy.rs` | [`LatentPolicy`]: embedding, N(0, I) latent, couplings, tanh; sample, log pi, deterministic |
 //! | `density.rs` | log-densities: latent prior, squash correction, action prior |
-//! | `critic.rs` | [`QNet`], [`ValueNet`] |
+//! | `critic.rs` | [`QNet`], [`ValueNet`]: a scalar or a categorical output |
+//! | `categorical.rs` | [`Support`]: the atoms, C51's projection, the dissertation code's brackets |
+//! | `distributional.rs` | the losses of a categorical critic (soft C51, the dissertation's) |
 //! | `losses.rs` | the losses, one function per equation |
 //! | `optim.rs` | [`Adam`] with TensorFlow's epsilon placement and named moments |
 //! | `target.rs` | [`polyak_update`] between two `VarMap`s |
@@ -56,10 +58,12 @@
 
 mod acting;
 mod batch;
+mod categorical;
 mod config;
 mod coupling;
 mod critic;
 mod density;
+mod distributional;
 mod error;
 mod fused;
 mod learning;
@@ -77,7 +81,8 @@ mod vars;
 
 pub use acting::{Act, Actor, Mode};
 pub use batch::Batch;
-pub use config::{ActionPrior, AgentConfig};
+pub use categorical::{Brackets, Support};
+pub use config::{ActionPrior, AgentConfig, CategoricalConfig, CategoricalVariant, Critic};
 pub use coupling::{Coupling, CouplingOutput, CouplingSpec, Parity};
 pub use critic::{QNet, ValueNet};
 pub use density::{

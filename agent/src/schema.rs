@@ -3,7 +3,7 @@
 
 use std::collections::BTreeMap;
 
-use crate::config::AgentConfig;
+use crate::config::{AgentConfig, CategoricalConfig, CategoricalVariant, Critic};
 use crate::error::{Error, Result};
 use crate::fused::layout::{Layout, Role};
 
@@ -35,9 +35,21 @@ pub fn networks_from_schema(schema: &Schema, base: &AgentConfig) -> Result<Agent
     let action = shape("q1.layer0.weight_action")?;
     let (obs_dim, act_dim) = (observation.get(1).copied().unwrap_or(0), action.get(1).copied().unwrap_or(0));
     let mut critic_hidden = outputs("q1.", "weight_observation");
-    if critic_hidden.pop() != Some(1) {
-        return Err(bad("q1's last layer does not have one output".into()));
-    }
+    // The head: one output (scalar), the atoms' logits, or a width-1 layer then the atoms'
+    // logits (the dissertation's categorical critic). The support's bounds keep `base`'s values.
+    let (critic, categorical) = match critic_hidden.pop() {
+        Some(1) => (Critic::Scalar, base.categorical.clone()),
+        Some(atoms) if critic_hidden.last() == Some(&1) => {
+            critic_hidden.pop();
+            let variant = CategoricalVariant::Dissertation;
+            (Critic::Categorical, CategoricalConfig { variant, atoms, ..base.categorical.clone() })
+        }
+        Some(atoms) => {
+            let variant = CategoricalVariant::SoftC51;
+            (Critic::Categorical, CategoricalConfig { variant, atoms, ..base.categorical.clone() })
+        }
+        None => return Err(bad("q1 has no layers".into())),
+    };
     let embedding_layers = outputs("policy.embedding.", "weight");
     let couplings: Vec<usize> = schema
         .keys()
@@ -55,6 +67,8 @@ pub fn networks_from_schema(schema: &Schema, base: &AgentConfig) -> Result<Agent
         coupling_layers,
         coupling_hidden,
         twin_q: schema.contains_key("q2.layer0.weight_action"),
+        critic,
+        categorical,
         ..base.clone()
     };
     cfg.validate().map_err(|e| bad(format!("the tensors describe no valid networks: {e}")))?;
@@ -81,7 +95,16 @@ mod tests {
         for cfg in [
             small.clone(),
             AgentConfig { twin_q: true, learn_temperature: true, ..small.clone() },
-            AgentConfig { twin_q: true, act_dim: 1, ..small },
+            AgentConfig { twin_q: true, act_dim: 1, ..small.clone() },
+            AgentConfig { critic: Critic::Categorical, ..small.clone() },
+            AgentConfig {
+                critic: Critic::Categorical,
+                categorical: CategoricalConfig {
+                    variant: CategoricalVariant::Dissertation,
+                    ..Default::default()
+                },
+                ..small
+            },
         ] {
             let learner = crate::Learner::new(cfg.clone(), 3).unwrap();
             let theirs: BTreeMap<String, Vec<usize>> = learner
@@ -115,6 +138,16 @@ mod tests {
             AgentConfig { act_dim: 1, ..small.clone() },
             AgentConfig { coupling_hidden: vec![], ..small.clone() },
             AgentConfig::for_task(105, 8),
+            AgentConfig { critic: Critic::Categorical, ..small.clone() },
+            AgentConfig {
+                critic: Critic::Categorical,
+                categorical: CategoricalConfig {
+                    variant: CategoricalVariant::Dissertation,
+                    atoms: 11,
+                    ..Default::default()
+                },
+                ..small.clone()
+            },
         ] {
             let mut schema = snapshot_schema(&cfg);
             // A checkpoint's other tensors are ignored.

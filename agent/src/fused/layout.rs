@@ -216,8 +216,7 @@ impl Layout {
     /// The arena of `cfg`'s networks.
     pub(crate) fn new(cfg: &AgentConfig) -> Self {
         let (obs, act) = (cfg.obs_dim, cfg.act_dim);
-        let mut critic = cfg.critic_hidden.clone();
-        critic.push(1);
+        let critic = cfg.critic_layers();
         let (h_v, h_e, h_q) = (critic[0], cfg.embedding_layers[0], critic[0]);
         let q_roles: &[Role] = if cfg.twin_q { &[Role::Q, Role::Q2] } else { &[Role::Q] };
         let mut b = Builder { arrays: Vec::new(), len: 0 };

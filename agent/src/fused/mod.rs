@@ -17,14 +17,15 @@
 //!
 //! # What is fused
 //!
-//! Every option of [`AgentConfig`]: the paper's configuration (single Q, likelihood-ratio policy
+//! Every option of [`AgentConfig`] except the categorical critic (its softmax, projection and
+//! cross-entropy would be kernels of their own; it runs on candle): the paper's configuration (single Q, likelihood-ratio policy
 //! gradient, fixed temperature) and each option beyond it — the reparameterised policy gradient
 //! (through the flow and the tanh), twin Q (clipped double Q), the learned temperature — with any
 //! layer widths (a one-layer embedding included) and number of coupling layers, any action
 //! dimension (a 1-d action's odd coupling layer is the identity), normal or uniform action prior,
 //! squash on or off, ReLU or linear embedding output (so the hierarchy's higher levels too), IS
-//! weights. [`FusedLearner::check_support`] still exists so that a configuration the fused kernels
-//! cannot run would be named, not silently run on candle.
+//! weights. [`FusedLearner::check_support`] names a configuration the fused kernels cannot run, so
+//! [`Backend::Fused`] refuses it and [`Backend::Auto`] picks candle.
 //!
 //! # Equality with candle
 //!
@@ -92,7 +93,15 @@ pub struct FusedLearner {
 impl FusedLearner {
     /// Why `cfg` cannot be fused, or `Ok` if it can.
     pub fn check_support(cfg: &AgentConfig) -> Result<()> {
-        // Every option is fused; a level whose every coupling layer is the identity (one coupling
+        if cfg.critic != crate::config::Critic::Scalar {
+            // A categorical critic's losses take a softmax, a projection and a cross-entropy: not
+            // the shape of the fused kernels (`docs/sac-lsp.md` §13).
+            return Err(Error::InvalidConfig(
+                "the fused learner implements the scalar critic only; a categorical critic trains on the candle Learner"
+                    .into(),
+            ));
+        }
+        // Every other option is fused; a level whose every coupling layer is the identity (one coupling
         // layer on a 1-d action) has no policy parameters to train, which candle accepts.
         if cfg.act_dim < 2 && cfg.coupling_layers < 2 {
             return Err(Error::InvalidConfig(

@@ -2,7 +2,9 @@
 //! learner and actor, snapshots and checkpoints round-trip.
 
 use super::{random_batch, small};
-use crate::{Actor, AgentConfig, Batch, Learner, Metrics, Mode};
+use crate::{
+    Actor, AgentConfig, Batch, CategoricalConfig, CategoricalVariant, Critic, Learner, Metrics, Mode,
+};
 
 fn mean(xs: &[f32]) -> f32 {
     xs.iter().sum::<f32>() / xs.len() as f32
@@ -152,4 +154,51 @@ fn actor_modes_and_input_checks() {
     assert!(actor.act(&obs[1..], Mode::Explore).is_err());
     let bad = Batch { rewards: vec![0.0; 3], ..random_batch(&cfg, 4, 1) };
     assert!(actor.td_errors(&bad).unwrap_err().to_string().contains("batch.rewards"));
+}
+
+fn categorical(variant: CategoricalVariant) -> AgentConfig {
+    let categorical = CategoricalConfig { variant, atoms: 21, v_min: -60.0, v_max: 200.0 };
+    AgentConfig { critic: Critic::Categorical, categorical, ..small() }
+}
+
+#[test]
+fn soft_c51_fits_its_targets_and_its_td_errors_are_the_actors() {
+    let cfg = categorical(CategoricalVariant::SoftC51);
+    let batch = random_batch(&cfg, 64, 9);
+    let mut learner = Learner::new(cfg.clone(), 1).unwrap();
+    let outs: Vec<_> = (0..300).map(|_| learner.update(&batch).unwrap()).collect();
+    // The TD errors are the distributions' means against the mean target: they shrink as the
+    // cross-entropies fall.
+    let abs_td = |o: &crate::UpdateOutput| mean(&o.td_errors.iter().map(|d| d.abs()).collect::<Vec<_>>());
+    let first = mean(&outs[..5].iter().map(abs_td).collect::<Vec<_>>());
+    let last = mean(&outs[280..].iter().map(abs_td).collect::<Vec<_>>());
+    assert!(last < 0.5 * first, "mean |TD| {first} -> {last}");
+    let (q0, q1) = (outs[0].metrics.q_loss, outs[299].metrics.q_loss);
+    assert!(q1 < q0, "cross-entropy {q0} -> {q1}");
+    assert!(outs.iter().all(|o| o.metrics.policy_loss.is_finite() && o.metrics.v_loss.is_finite()));
+    let mut actor = Actor::new(cfg, 2).unwrap();
+    actor.load(&learner.snapshot().unwrap()).unwrap();
+    assert_eq!(actor.td_errors(&batch).unwrap(), learner.update(&batch).unwrap().td_errors);
+}
+
+#[test]
+fn the_dissertations_categorical_critic_trains_without_non_finite_values() {
+    let cfg = categorical(CategoricalVariant::Dissertation);
+    let batch = Batch { is_weights: Some(vec![0.5; 16]), ..random_batch(&cfg, 16, 10) };
+    let (mut learner, metrics) = train(cfg.clone(), &batch, 30);
+    assert!(
+        metrics.iter().all(|m| [m.q_loss, m.v_loss, m.policy_loss, m.mean_q].iter().all(|x| x.is_finite()))
+    );
+    // Resume and snapshot work as for the scalar critic.
+    let mut restored = Learner::from_checkpoint(cfg, &learner.checkpoint().unwrap()).unwrap();
+    assert_eq!(learner.update(&batch).unwrap(), restored.update(&batch).unwrap());
+}
+
+#[test]
+fn a_categorical_critic_runs_on_candle_under_auto_and_is_refused_by_fused() {
+    use crate::{AnyLearner, Backend};
+    let cfg = categorical(CategoricalVariant::SoftC51);
+    assert_eq!(AnyLearner::new(cfg.clone(), 1, Backend::Auto).unwrap().backend(), Backend::Candle);
+    let err = AnyLearner::new(cfg, 1, Backend::Fused).unwrap_err().to_string();
+    assert!(err.contains("categorical"), "{err}");
 }
