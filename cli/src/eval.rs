@@ -16,6 +16,7 @@ use learner::{Episode, Evaluation, prepare_latent, run_episode};
 use node::{HierarchyKeys, RunKeys};
 use proto::EvalMode;
 use sim::Task;
+use sim::her::HerConfig;
 
 use serde::Serialize;
 
@@ -100,6 +101,7 @@ struct RunFile {
     keys: RunKeys,
     agent: AgentConfig,
     hierarchy: HierarchyKeys,
+    her: HerConfig,
 }
 
 /// Runs the evaluation.
@@ -114,7 +116,9 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         (None, None) => Task::AntV5,
     };
     let policy = read_policy(&args.checkpoint, run_file.as_ref())?;
-    let spec = task.make(0)?.spec().clone();
+    // With HER the policy sees observation ++ goal: episodes step the run's goal-conditioned task.
+    let her = run_file.as_ref().map(|r| r.her.clone()).unwrap_or_default();
+    let spec = her.make(task, 0)?.spec().clone();
     // Real NVP keeps the dimension: every level's action (and latent) is as wide as the env's.
     let (obs_dim, act_dim) = (policy.config.obs_dim, policy.config.act_dim);
     if (obs_dim, act_dim) != (spec.obs_dim, spec.act_dim) {
@@ -125,7 +129,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             spec.act_dim
         );
     }
-    let episodes = run_episodes(args, task, &policy)?;
+    let episodes = run_episodes(args, task, &her, &policy)?;
     let csv = args.csv.clone().unwrap_or_else(|| default_csv(&args.checkpoint, args.latent, args.seed));
     write_csv(&csv, &episodes)?;
     println!("{}", serde_json::to_string(&Summary::new(args, task, &policy, &episodes, &csv))?);
@@ -146,7 +150,10 @@ fn read_run_file(path: &Path) -> Result<RunFile> {
     let agent: AgentConfig = node::config::parse_section_over(&text, "agent", &base)
         .map_err(anyhow::Error::msg)
         .with_context(|| parse("agent"))?;
-    Ok(RunFile { keys, agent, hierarchy })
+    let her: HerConfig = node::config::parse_section(&text, "her")
+        .map_err(anyhow::Error::msg)
+        .with_context(|| parse("her"))?;
+    Ok(RunFile { keys, agent, hierarchy, her })
 }
 
 /// Reads the weights, the networks they fit, and the frozen levels below them.
@@ -181,7 +188,7 @@ fn read_policy(path: &Path, run_file: Option<&RunFile>) -> Result<Policy> {
 }
 
 /// Runs every episode, spread over the threads, and returns them in episode order.
-fn run_episodes(args: &EvalArgs, task: Task, policy: &Policy) -> Result<Vec<Episode>> {
+fn run_episodes(args: &EvalArgs, task: Task, her: &HerConfig, policy: &Policy) -> Result<Vec<Episode>> {
     let mode = args.latent.mode();
     // The fixed latent, drawn once from the seed and shared by every thread.
     let mut first = policy.actor(args.seed)?;
@@ -196,7 +203,7 @@ fn run_episodes(args: &EvalArgs, task: Task, policy: &Policy) -> Result<Vec<Epis
             let latent = &latent;
             scope.spawn(move || {
                 let work = || -> Result<()> {
-                    let mut env = task.make(args.seed)?;
+                    let mut env = her.make(task, args.seed)?;
                     let mut actor = policy.actor(args.seed)?;
                     actor.load(&policy.snapshot)?;
                     actor.set_fixed_latent(latent)?;
@@ -249,9 +256,10 @@ fn default_csv(checkpoint: &Path, latent: Latent, seed: u64) -> PathBuf {
 }
 
 fn write_csv(path: &Path, episodes: &[Episode]) -> Result<()> {
-    let mut out = String::from("episode,return,length\n");
+    let mut out = String::from("episode,return,length,goal_reached\n");
     for (i, e) in episodes.iter().enumerate() {
-        out.push_str(&format!("{i},{},{}\n", e.episode_return, e.length));
+        let reached = e.goal_reached.map_or(String::new(), |r| u8::from(r).to_string());
+        out.push_str(&format!("{i},{},{},{reached}\n", e.episode_return, e.length));
     }
     let mut file = std::fs::File::create(path).with_context(|| format!("writing {}", path.display()))?;
     file.write_all(out.as_bytes())?;
@@ -276,12 +284,15 @@ struct Summary {
     max: f64,
     median: f64,
     mean_length: f64,
+    /// With HER: the fraction of episodes that reached their goal at some step.
+    goal_success: Option<f64>,
     csv: String,
 }
 
 impl Summary {
     fn new(args: &EvalArgs, task: Task, policy: &Policy, episodes: &[Episode], csv: &Path) -> Self {
-        let Evaluation { mean_return: mean, std_return: std, mean_length } = Evaluation::of(episodes);
+        let Evaluation { mean_return: mean, std_return: std, mean_length, goal_success } =
+            Evaluation::of(episodes);
         let mut sorted: Vec<f64> = episodes.iter().map(|e| e.episode_return).collect();
         sorted.sort_by(f64::total_cmp);
         let mid = sorted.len() / 2;
@@ -301,6 +312,7 @@ impl Summary {
             max: sorted[sorted.len() - 1],
             median,
             mean_length,
+            goal_success,
             csv: csv.display().to_string(),
         }
     }
@@ -349,8 +361,12 @@ mod tests {
         assert_eq!((policy.config.obs_dim, policy.config.act_dim, policy.config.twin_q), (4, 1, true));
         assert_eq!(policy.learner_step, Some(0));
         for latent in [Latent::Fixed, Latent::Zero, Latent::Stochastic] {
-            let one = run_episodes(&args(&path, latent, 1), Task::InvertedPendulum, &policy).unwrap();
-            let three = run_episodes(&args(&path, latent, 3), Task::InvertedPendulum, &policy).unwrap();
+            let one =
+                run_episodes(&args(&path, latent, 1), Task::InvertedPendulum, &HerConfig::default(), &policy)
+                    .unwrap();
+            let three =
+                run_episodes(&args(&path, latent, 3), Task::InvertedPendulum, &HerConfig::default(), &policy)
+                    .unwrap();
             assert_eq!(one, three, "{latent:?}");
             assert_eq!(one.len(), 6);
             assert!(one.iter().all(|e| e.length >= 1 && e.episode_return.is_finite()));
@@ -359,7 +375,7 @@ mod tests {
         run(&args(&path, Latent::Zero, 2)).unwrap();
         let csv = std::fs::read_to_string(default_csv(&path, Latent::Zero, 11)).unwrap();
         assert_eq!(csv.lines().count(), 7);
-        assert!(csv.starts_with("episode,return,length\n0,"));
+        assert!(csv.starts_with("episode,return,length,goal_reached\n0,"));
     }
 
     #[test]
@@ -404,8 +420,20 @@ mod tests {
         let policy = read_policy(&path, None).unwrap();
         assert_eq!(policy.frozen.len(), 1);
         assert!(!policy.config.squash && !policy.config.embedding_output_relu, "the level-above settings");
-        let one = run_episodes(&args(&path, Latent::Fixed, 1), Task::InvertedPendulum, &policy).unwrap();
-        let two = run_episodes(&args(&path, Latent::Fixed, 2), Task::InvertedPendulum, &policy).unwrap();
+        let one = run_episodes(
+            &args(&path, Latent::Fixed, 1),
+            Task::InvertedPendulum,
+            &HerConfig::default(),
+            &policy,
+        )
+        .unwrap();
+        let two = run_episodes(
+            &args(&path, Latent::Fixed, 2),
+            Task::InvertedPendulum,
+            &HerConfig::default(),
+            &policy,
+        )
+        .unwrap();
         assert_eq!(one, two);
         assert!(one.iter().all(|e| e.length >= 1 && e.episode_return.is_finite()));
         // A plain top-level file with the frozen level named by a run file evaluates the same.
@@ -415,7 +443,13 @@ mod tests {
         std::fs::write(&run_file, format!("[hierarchy]\nlevels = [{:?}]\n", low.display().to_string()))
             .unwrap();
         let named = read_policy(&plain, Some(&read_run_file(&run_file).unwrap())).unwrap();
-        let again = run_episodes(&args(&plain, Latent::Fixed, 1), Task::InvertedPendulum, &named).unwrap();
+        let again = run_episodes(
+            &args(&plain, Latent::Fixed, 1),
+            Task::InvertedPendulum,
+            &HerConfig::default(),
+            &named,
+        )
+        .unwrap();
         assert_eq!(one, again);
     }
 

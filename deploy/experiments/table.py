@@ -15,6 +15,18 @@ ROWS = [
     ("distributed", "Distributed SAC-LSP", 4425.76),
     ("2l-distributed", "2L Distributed SAC-LSP", 5173.40),
 ]
+# The extensions, on the distributed row; listed when run. HER: (P)osition or (S)peed goal,
+# (B)inary, (S)um-augmented or (P)roportionally-augmented reward (Table 5.4's names).
+EXTENSIONS = [
+    ("categorical", "Categorical SAC-LSP (soft C51)", 237.02),
+    ("categorical-dissertation", "Categorical SAC-LSP (the dissertation's)", 237.02),
+    ("her-position-binary", "P.B. HER SAC-LSP", 25.05),
+    ("her-position-sum", "P.S. HER SAC-LSP", 1020.32),
+    ("her-position-proportional", "P.P. HER SAC-LSP", 1345.33),
+    ("her-speed-binary", "S.B. HER SAC-LSP", 32.85),
+    ("her-speed-sum", "S.S. HER SAC-LSP", 1146.52),
+    ("her-speed-proportional", "S.P. HER SAC-LSP", 1595.57),
+]
 
 
 def load(table_id, row, name):
@@ -41,7 +53,8 @@ def main():
     head += "paper (10M updates) | paper rel. | " if paper else ""
     print(head + "train minutes |")
     print("|---|---|---|---|---|---|" + ("---|---|" if paper else "") + "---|")
-    for row, name, figure in ROWS:
+    ran = [r for r in EXTENSIONS if load(table_id, r[0], "eval")]
+    for row, name, figure in ROWS + ran:
         e, zero = load(table_id, row, "eval"), load(table_id, row, "eval-zero")
         seconds = pathlib.Path("runs") / f"{table_id}-{row}" / "train_seconds"
         rel = f"{e['mean'] / base['mean']:.2f}" if e and base else ""
@@ -50,6 +63,10 @@ def main():
             cells += [f"{figure:.2f}", f"{figure / 3157.40:.2f}"]
         cells.append(f"{int(seconds.read_text()) / 60:.1f}" if seconds.exists() else "")
         print(f"| {name} | " + " | ".join(cells) + " |")
+    if ran:
+        print("\nThe extensions run on the distributed row's configuration; rel. is still against the")
+        print("SAC-LSP row, as the paper's. HER rows report the environment's own reward (as the paper")
+        print("does); their goal success rates are in their eval*.json.")
     low, low_zero = load(table_id, "2l-distributed", "eval-low"), load(table_id, "2l-distributed", "eval-low-zero")
     if low:
         print(f"\nThe 2L row's frozen low level alone, evaluated the same way: fixed h {cell(low)}, "

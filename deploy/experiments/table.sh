@@ -6,7 +6,10 @@
 #
 # Rows, in order: sac-lsp (`sac-lsp train`, uniform replay), prioritized (`sac-lsp train`,
 # prioritized replay), distributed (`deploy/local.sh 8`), 2l-distributed (`deploy/local.sh 8` training
-# a second level on top of the distributed row's policy, frozen). Equal learner updates, as the
+# a second level on top of the distributed row's policy, frozen). Not run unless ROWS names them,
+# the dissertation's other extensions on the distributed row: categorical (soft C51),
+# categorical-dissertation (its own formulation), her-<goal>-<reward> (every run file
+# deploy/experiments/<task>-her-*.toml; `docs/sac-lsp.md` §13-§14). Equal learner updates, as the
 # dissertation's text splits them: the 1-level rows get UPDATES; the 2-level row's low level is the
 # distributed row's checkpoint at 60% of UPDATES and its high level gets the other 40% (its 6,000 +
 # 4,000 epochs against 10,000).
@@ -57,7 +60,7 @@ run_row() {
                 ${MAX_MINUTES:+--minutes "$MAX_MINUTES"} --out "$dir" >"$dir/train.log" 2>&1
             ls "$dir"/checkpoints/epoch-*.safetensors | tail -n 1
             ;;
-        distributed)
+        distributed | categorical* | her-*)
             # Checkpoints every fifth of the budget: the newest three (60%, 80%, 100%) stay, and
             # the 2-level row starts from the 60% one.
             with_keys "$file" learner "max_updates = $updates

@@ -54,6 +54,8 @@ pub struct ExecutorConfig {
     /// `[hierarchy]`: only how many frozen levels there are; the levels themselves come over the
     /// bus from the param server, so this host needs none of their files.
     pub hierarchy: node::HierarchyKeys,
+    /// `[her]`: goals appended to the observation, goal rewards, relabelled episodes.
+    pub her: sim::her::HerConfig,
 }
 
 impl ExecutorConfig {
@@ -62,9 +64,9 @@ impl ExecutorConfig {
         self.train.task.parse::<Task>().map_err(|e| format!("[train] task: {e}"))
     }
 
-    /// Sets the agent's dimensions from the task.
+    /// Sets the agent's dimensions from the task (with HER, the goal is part of the observation).
     pub fn fitted(mut self) -> Result<Self, String> {
-        let env = self.task()?.make(0).map_err(|e| e.to_string())?;
+        let env = self.her.make(self.task()?, 0).map_err(|e| e.to_string())?;
         self.agent.obs_dim = env.spec().obs_dim;
         self.agent.act_dim = env.spec().act_dim;
         Ok(self)
@@ -89,7 +91,7 @@ impl node::RoleConfig for ExecutorConfig {
         if s.batch_transitions as usize > proto::MAX_BATCH_LEN {
             return Err(format!("[executor] batch_transitions must be at most {}", proto::MAX_BATCH_LEN));
         }
-        self.task()?;
+        self.her.validate(self.task()?, self.agent.n_step)?;
         self.agent.validate().map_err(|e| format!("[agent] {e}"))
     }
 

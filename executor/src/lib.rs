@@ -81,7 +81,9 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
     let started = std::time::Instant::now();
     let id = bus.node().id;
     let seed = executor_seed(config.train.seed, id);
-    let env = config.task().map_err(anyhow::Error::msg)?.make(seed)?;
+    let task = config.task().map_err(anyhow::Error::msg)?;
+    let env = config.her.make(task, seed)?;
+    let hindsight = config.her.hindsight(task, seed.wrapping_add(2));
     let rejects = Arc::new(Mutex::new(Rejects::default()));
     let ms = Duration::from_millis;
     let (stack, stack_hash) = match config.hierarchy.depth() {
@@ -99,7 +101,9 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
         }
     };
     let actor = Actor::with_stack(config.agent.clone(), stack, seed.wrapping_add(1))?;
-    let rollout = Rollout::new(id, env, actor, seed).with_episode_limit(config.executor.max_episode_steps);
+    let rollout = Rollout::new(id, env, actor, seed)
+        .with_episode_limit(config.executor.max_episode_steps)
+        .with_hindsight(hindsight);
 
     let session = bus.session().clone();
     let run = bus.run().clone();

@@ -7,6 +7,7 @@
 use agent::{Actor, Batch, Mode, NStepReturns, ParamSnapshot, StepEnd};
 use proto::{EpisodeReport, ExperienceBatch, Transition, Transitions};
 use sim::Environment;
+use sim::her::Hindsight;
 
 /// What one step produced besides the stored transition.
 #[derive(Debug, Clone, PartialEq)]
@@ -29,6 +30,8 @@ pub struct Rollout {
     observation: Vec<f32>,
     pending: Transitions,
     n_step: NStepReturns,
+    /// With HER (`[her]`): the stored goal reward and each episode's relabelled copies.
+    hindsight: Option<Hindsight>,
     episode: u64,
     episode_return: f64,
     episode_length: u32,
@@ -65,6 +68,7 @@ impl Rollout {
             observation,
             pending,
             n_step,
+            hindsight: None,
             episode: 0,
             episode_return: 0.0,
             episode_length: 0,
@@ -80,6 +84,13 @@ impl Rollout {
         if let Some(limit) = limit {
             self.episode_limit = self.episode_limit.min(limit.max(1));
         }
+        self
+    }
+
+    /// Stores goal rewards and relabelled copies of each episode's steps (HER); `env` must be the
+    /// matching [`sim::her::GoalEnv`], whose steps report their goal.
+    pub fn with_hindsight(mut self, hindsight: Option<Hindsight>) -> Self {
+        self.hindsight = hindsight;
         self
     }
 
@@ -112,11 +123,18 @@ impl Rollout {
         let step = self.env.step(&action)?;
         self.env_steps += 1;
         let next_observation = to_f32(&step.observation);
-        let reward = step.reward as f32;
+        // With HER the stored reward is the goal reward; the episode's return stays the task's own.
+        let reward = match (&self.hindsight, &step.goal) {
+            (Some(h), Some(status)) => h.reward(step.reward, status) as f32,
+            _ => step.reward as f32,
+        };
         let finite = reward.is_finite() && next_observation.iter().all(|v| v.is_finite());
         if !finite {
             // MuJoCo blew up; a NaN in one transition would make the replay server reject the batch.
             let dropped_n_step_tail = self.n_step.clear();
+            if let Some(h) = &mut self.hindsight {
+                h.discard_episode();
+            }
             self.reset_episode();
             return Ok(StepOutcome { episode: None, dropped_non_finite: true, dropped_n_step_tail });
         }
@@ -136,7 +154,23 @@ impl Rollout {
                     terminated: t.terminated,
                 })
             })?;
+        if let (Some(h), Some(status)) = (&mut self.hindsight, &step.goal) {
+            h.record(&self.observation, &act.action, step.reward, &next_observation, step.terminated, status);
+        }
         if step.terminated || truncated {
+            if let Some(h) = &mut self.hindsight {
+                h.finish_episode(|t| {
+                    pending
+                        .push(Transition {
+                            observation: &t.observation,
+                            action: &t.action,
+                            reward: t.reward,
+                            next_observation: &t.next_observation,
+                            terminated: t.terminated,
+                        })
+                        .unwrap_or_else(|e| unreachable!("relabelled rows have the stored widths: {e}"))
+                });
+            }
             let report = EpisodeReport {
                 executor_id: self.executor_id,
                 episode: self.episode,
@@ -161,17 +195,14 @@ impl Rollout {
         self.observation = to_f32(&self.env.reset(None));
     }
 
-    /// The pending transitions as one batch with their initial priorities, or `None` if there are none.
-    pub fn flush(&mut self) -> anyhow::Result<Option<ExperienceBatch>> {
+    /// At most `limit` of the pending transitions, oldest first, as one batch with their initial
+    /// priorities, or `None` if there are none. (An episode's end can add k times its length at once
+    /// with HER; the caller flushes until `None`.)
+    pub fn flush(&mut self, limit: usize) -> anyhow::Result<Option<ExperienceBatch>> {
         if self.pending.is_empty() {
             return Ok(None);
         }
-        let spec = self.env.spec();
-        let capacity = self.pending.len();
-        let transitions = std::mem::replace(
-            &mut self.pending,
-            Transitions::with_capacity(spec.obs_dim as u32, spec.act_dim as u32, capacity),
-        );
+        let transitions = self.pending.split_front(limit.max(1));
         let batch = Batch {
             size: transitions.len(),
             observations: transitions.observations.clone(),
@@ -231,7 +262,7 @@ mod tests {
             }
         }
         assert_eq!(r.env_steps(), 200);
-        let batch = r.flush().unwrap().unwrap();
+        let batch = r.flush(usize::MAX).unwrap().unwrap();
         assert_eq!(batch.len(), 200);
         assert_eq!(batch.validate(), Ok(()));
         assert_eq!((batch.executor_id, batch.seq, batch.env_steps), (7, 0, 200));
@@ -254,9 +285,9 @@ mod tests {
         for (a, b) in batch.td_errors.iter().zip(&own) {
             assert!((a - b).abs() <= 1e-4 * (1.0 + b.abs()), "{a} vs {b}");
         }
-        assert!(r.flush().unwrap().is_none(), "nothing pending after a flush");
+        assert!(r.flush(usize::MAX).unwrap().is_none(), "nothing pending after a flush");
         r.step().unwrap();
-        assert_eq!(r.flush().unwrap().unwrap().seq, 1);
+        assert_eq!(r.flush(usize::MAX).unwrap().unwrap().seq, 1);
     }
 
     #[test]
@@ -270,7 +301,7 @@ mod tests {
             dropped += outcome.dropped_n_step_tail;
             truncated += usize::from(outcome.episode.is_some_and(|e| !e.terminated));
         }
-        let batch = r.flush().unwrap().unwrap();
+        let batch = r.flush(usize::MAX).unwrap().unwrap();
         assert_eq!(batch.validate(), Ok(()));
         // Each truncated episode leaves its last two steps out; the open ones are still pending.
         assert_eq!(dropped, 2 * truncated);
@@ -280,5 +311,51 @@ mod tests {
         let (t, rewards) = (&batch.transitions.terminated, &batch.transitions.rewards);
         assert!(t.iter().zip(rewards).filter(|(d, _)| !**d).all(|(_, r)| (r - full).abs() < 1e-5));
         assert!(t.iter().zip(rewards).filter(|(d, _)| **d).all(|(_, r)| *r <= full + 1e-5));
+    }
+}
+
+#[cfg(test)]
+mod her_tests {
+    use agent::{AgentConfig, Learner};
+    use proto::Message;
+    use sim::Task;
+    use sim::her::{GoalKind, GoalReward, HerConfig};
+
+    use super::*;
+
+    #[test]
+    fn episodes_end_with_k_relabelled_copies_published_in_bounded_batches() {
+        let her = HerConfig { goal: GoalKind::Speed, reward: GoalReward::Binary, ..HerConfig::default() };
+        let task = Task::InvertedPendulum;
+        let env = her.make(task, 3).unwrap();
+        let cfg = AgentConfig {
+            critic_hidden: vec![8],
+            embedding_layers: vec![8, 2],
+            ..AgentConfig::for_task(env.spec().obs_dim, env.spec().act_dim)
+        };
+        assert_eq!(cfg.obs_dim, 6);
+        let mut actor = Actor::new(cfg.clone(), 2).unwrap();
+        actor.load(&Learner::new(cfg, 1).unwrap().snapshot().unwrap()).unwrap();
+        let mut r = Rollout::new(7, env, actor, 3).with_hindsight(her.hindsight(task, 4));
+        let mut finished = 0;
+        for _ in 0..200 {
+            if let Some(ep) = r.step().unwrap().episode {
+                finished += ep.length as usize;
+                // The reported return is the task's own: the pendulum pays 1 per step it stays up.
+                assert_eq!(ep.episode_return, f64::from(ep.length - u32::from(ep.terminated)));
+            }
+        }
+        assert!(finished > 0);
+        assert_eq!(r.pending(), 200 + 4 * finished);
+        let mut batches = Vec::new();
+        while let Some(b) = r.flush(64).unwrap() {
+            batches.push(b);
+        }
+        assert!(batches.iter().all(|b| b.len() <= 64 && b.validate() == Ok(())));
+        assert_eq!(batches.iter().map(|b| b.len()).sum::<usize>(), 200 + 4 * finished);
+        // Binary goal rewards only: 0 (reached) or -1.
+        let rewards: Vec<f32> = batches.iter().flat_map(|b| b.transitions.rewards.clone()).collect();
+        assert!(rewards.iter().all(|r| *r == 0.0 || *r == -1.0));
+        assert!(rewards.contains(&0.0), "relabelled goals are reached");
     }
 }

@@ -328,8 +328,9 @@ impl Worker {
         Ok(())
     }
 
+    /// Publishes every pending transition, in batches of at most `batch_transitions`.
     fn flush(&mut self) -> anyhow::Result<()> {
-        if let Some(batch) = self.rollout.flush()? {
+        while let Some(batch) = self.rollout.flush(self.settings.batch_transitions as usize)? {
             self.report.batches += 1;
             self.send(Out::Experience(batch));
         }

@@ -89,12 +89,15 @@ pub struct LearnerConfig {
     pub agent: AgentConfig,
     /// `[train]`: task and seed.
     pub train: RunKeys,
-    /// `[replay_server]`, the one key the learner must agree with.
+    /// `[replay_server]`: the keys the learner must agree with.
     pub replay_server: ReplayDeadline,
     /// `[param_server]`, the task dimensions it checks weights against.
     pub param_server: ParamServerDims,
     /// `[hierarchy]`: frozen levels below the trained one (their files are read here).
     pub hierarchy: node::HierarchyKeys,
+    /// `[her]`: with goals, the networks' input is observation ++ goal and evaluations step the
+    /// goal-conditioned task (relabelling happens in the executors).
+    pub her: sim::her::HerConfig,
 }
 
 /// The dimensions the param server builds its weights schema from, read from the shared run file
@@ -115,6 +118,10 @@ pub struct ParamServerDims {
 pub struct ReplayDeadline {
     /// `request_deadline_ms` (absent: the replay server's default).
     pub request_deadline_ms: Option<u64>,
+    /// `obs_dim` (absent: the replay server's default, Ant-v5's).
+    pub obs_dim: Option<u32>,
+    /// `act_dim` (absent: the replay server's default).
+    pub act_dim: Option<u32>,
 }
 
 impl LearnerConfig {
@@ -123,9 +130,9 @@ impl LearnerConfig {
         self.train.task.parse::<Task>().map_err(|e| format!("[train] task: {e}"))
     }
 
-    /// Sets the agent's dimensions from the task.
+    /// Sets the agent's dimensions from the task (with HER, the goal is part of the observation).
     pub fn fitted(mut self) -> Result<Self, String> {
-        let env = self.task()?.make(0).map_err(|e| e.to_string())?;
+        let env = self.her.make(self.task()?, 0).map_err(|e| e.to_string())?;
         self.agent.obs_dim = env.spec().obs_dim;
         self.agent.act_dim = env.spec().act_dim;
         Ok(self)
@@ -168,17 +175,29 @@ impl node::RoleConfig for LearnerConfig {
                 proto::MAX_BATCH_LEN
             ));
         }
-        self.task()?;
+        self.her.validate(self.task()?, self.agent.n_step)?;
+        let (ours, task) = ((self.agent.obs_dim, self.agent.act_dim), &self.train.task);
+        let goal = if self.her.enabled() { " with its [her] goal" } else { "" };
         let dims = &self.param_server;
-        for (key, theirs, ours) in
-            [("obs_dim", dims.obs_dim, self.agent.obs_dim), ("act_dim", dims.act_dim, self.agent.act_dim)]
-        {
+        for (key, theirs, ours) in [("obs_dim", dims.obs_dim, ours.0), ("act_dim", dims.act_dim, ours.1)] {
             if let Some(theirs) = theirs
                 && theirs as usize != ours
             {
                 return Err(format!(
-                    "[param_server] {key} = {theirs}, but the task {} has {ours}: the param server would refuse every weights frame",
-                    self.train.task
+                    "[param_server] {key} = {theirs}, but the task {task}{goal} has {ours}: the param server would refuse every weights frame"
+                ));
+            }
+        }
+        // The replay server has no task: its widths are its own keys (Ant-v5's when absent).
+        let replay = &self.replay_server;
+        let (obs, act) = proto::DEFAULT_TRANSITION_DIMS;
+        for (key, theirs, ours) in [
+            ("obs_dim", replay.obs_dim.unwrap_or(obs), ours.0),
+            ("act_dim", replay.act_dim.unwrap_or(act), ours.1),
+        ] {
+            if theirs as usize != ours {
+                return Err(format!(
+                    "[replay_server] {key} = {theirs}, but the task {task}{goal} has {ours}: the replay server would refuse every transition"
                 ));
             }
         }
@@ -221,6 +240,27 @@ mod tests {
             ..c
         };
         assert!(zero.validate().unwrap_err().contains("epoch_length_updates"));
+    }
+
+    #[test]
+    fn the_servers_widths_must_be_the_tasks_with_its_goal() {
+        let her = "[train]\ntask = \"ant-rllab\"\n[her]\ngoal = \"speed\"\n";
+        let c = LearnerConfig::parse(&format!("{her}[replay_server]\nobs_dim = 125\n")).unwrap();
+        assert_eq!(c.agent.obs_dim, 139);
+        let err = c.validate().unwrap_err();
+        assert!(err.contains("[replay_server] obs_dim = 125") && err.contains("[her] goal"), "{err}");
+        let c = LearnerConfig::parse(&format!(
+            "{her}[replay_server]\nobs_dim = 139\n[param_server]\nobs_dim = 125\n"
+        ))
+        .unwrap();
+        assert!(c.validate().unwrap_err().contains("[param_server] obs_dim = 125"));
+        let ok = LearnerConfig::parse(&format!(
+            "{her}[replay_server]\nobs_dim = 139\n[param_server]\nobs_dim = 139\n"
+        ));
+        assert_eq!(ok.unwrap().validate(), Ok(()));
+        // Without the keys, the replay server holds Ant-v5's widths: another task must name its own.
+        let pendulum = LearnerConfig::parse("[train]\ntask = \"inverted-pendulum\"\n").unwrap();
+        assert!(pendulum.validate().unwrap_err().contains("[replay_server] obs_dim = 105"));
     }
 
     #[test]

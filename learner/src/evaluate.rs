@@ -1,6 +1,7 @@
 //! The learner's evaluation: N episodes with the policy's latent chosen by an [`EvalMode`] — the
 //! paper's one latent drawn per evaluation and held for all its episodes (as the original's
-//! `deterministic()` context), h = 0, or the stochastic policy — undiscounted return.
+//! `deterministic()` context), h = 0, or the stochastic policy — undiscounted return (the task's
+//! own reward, also with HER) and, with HER, the goal success rate.
 
 use agent::{Actor, Mode};
 use proto::EvalMode;
@@ -15,6 +16,8 @@ pub struct Evaluation {
     pub std_return: f64,
     /// Mean episode length.
     pub mean_length: f64,
+    /// With HER: the fraction of episodes that reached their goal at some step.
+    pub goal_success: Option<f64>,
 }
 
 impl Evaluation {
@@ -25,7 +28,10 @@ impl Evaluation {
         let mean_return = episodes.iter().map(|e| e.episode_return).sum::<f64>() / n;
         let variance = episodes.iter().map(|e| (e.episode_return - mean_return).powi(2)).sum::<f64>() / n;
         let mean_length = episodes.iter().map(|e| e.length as f64).sum::<f64>() / n;
-        Self { mean_return, std_return: variance.sqrt(), mean_length }
+        let reached: Option<Vec<bool>> = episodes.iter().map(|e| e.goal_reached).collect();
+        let goal_success =
+            reached.filter(|r| !r.is_empty()).map(|r| r.iter().filter(|x| **x).count() as f64 / n);
+        Self { mean_return, std_return: variance.sqrt(), mean_length, goal_success }
     }
 }
 
@@ -36,6 +42,8 @@ pub struct Episode {
     pub episode_return: f64,
     /// Steps until termination or the time limit.
     pub length: u64,
+    /// With a goal ([`sim::her::GoalEnv`]): whether some step reached it.
+    pub goal_reached: Option<bool>,
 }
 
 /// Prepares `actor`'s latent for `mode` (the fixed-latent mode draws a new h here) and returns how
@@ -63,15 +71,19 @@ pub fn run_episode(
     seed: Option<u64>,
 ) -> anyhow::Result<Episode> {
     let mut observation = to_f32(&env.reset(seed));
-    let (mut episode_return, mut length) = (0.0, 0);
+    let (mut episode_return, mut length, mut goal_reached) = (0.0, 0, None);
     loop {
         let act = actor.act(&observation, mode)?;
         let action = env.spec().action_from_unit(&act.env_action);
         let step = env.step(&action)?;
+        // The task's own reward, with or without a goal (the dissertation reports it for HER too).
         episode_return += step.reward;
         length += 1;
+        if let Some(status) = &step.goal {
+            goal_reached = Some(goal_reached.unwrap_or(false) || status.reached);
+        }
         if step.terminated || step.truncated {
-            return Ok(Episode { episode_return, length });
+            return Ok(Episode { episode_return, length, goal_reached });
         }
         observation = to_f32(&step.observation);
     }

@@ -106,7 +106,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     let (out_tx, mut out_rx) = mpsc::channel(256);
     let eval = if s.eval_episodes > 0 {
         let (tx, rx) = std::sync::mpsc::sync_channel::<(u64, ParamSnapshot)>(1);
-        let env = config.task().map_err(anyhow::Error::msg)?.make(seed.wrapping_add(3))?;
+        let env = config.her.make(config.task().map_err(anyhow::Error::msg)?, seed.wrapping_add(3))?;
         let actor = Actor::with_stack(
             config.agent.clone(),
             PolicyStack::from_weights(&levels)?,

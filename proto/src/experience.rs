@@ -87,6 +87,21 @@ impl Transitions {
         Ok(())
     }
 
+    /// Moves the first `n` transitions (all, if fewer) into a batch of their own; the rest stay.
+    pub fn split_front(&mut self, n: usize) -> Transitions {
+        let n = n.min(self.len());
+        let (o, a) = (self.obs_dim as usize, self.act_dim as usize);
+        Transitions {
+            obs_dim: self.obs_dim,
+            act_dim: self.act_dim,
+            observations: self.observations.drain(..n * o).collect(),
+            actions: self.actions.drain(..n * a).collect(),
+            rewards: self.rewards.drain(..n).collect(),
+            next_observations: self.next_observations.drain(..n * o).collect(),
+            terminated: self.terminated.drain(..n).collect(),
+        }
+    }
+
     /// Transition `i`, if the columns hold it.
     pub fn get(&self, i: usize) -> Option<Transition<'_>> {
         // Checked, so an absurd index is `None` rather than an overflow.
@@ -219,6 +234,19 @@ mod tests {
         assert_eq!(t.get(2), None);
         assert_eq!(t.get(usize::MAX), None);
         assert_eq!(t.validate(), Ok(()));
+    }
+
+    #[test]
+    fn split_front_moves_the_first_rows_and_keeps_the_rest() {
+        let rows: Vec<Row> = (0..3).map(|i| Row::new(i as f32)).collect();
+        let mut t = Transitions::with_capacity(3, 2, 3);
+        rows.iter().for_each(|r| t.push(r.view()).unwrap());
+        let front = t.split_front(2);
+        assert_eq!((front.len(), t.len()), (2, 1));
+        assert_eq!((front.get(1), t.get(0)), (Some(rows[1].view()), Some(rows[2].view())));
+        assert_eq!((front.validate(), t.validate()), (Ok(()), Ok(())));
+        assert_eq!(t.split_front(5).len(), 1);
+        assert!(t.is_empty());
     }
 
     #[test]

@@ -72,8 +72,8 @@ pub use error::{DecodeError, Result, TopicError, ValidationError};
 pub use experience::{ExperienceBatch, Transition, Transitions};
 pub use params::{ContentHash, FrozenLevel, FrozenLevels, MAX_FROZEN_LEVELS, WeightsSnapshot};
 pub use sampling::{
-    DEFAULT_REQUEST_DEADLINE_MS, PriorityUpdate, RefusalReason, SampleRefusal, SampleReply, SampleRequest,
-    SampledBatch,
+    DEFAULT_REQUEST_DEADLINE_MS, DEFAULT_TRANSITION_DIMS, PriorityUpdate, RefusalReason, SampleRefusal,
+    SampleReply, SampleRequest, SampledBatch,
 };
 pub use stats::{BlockedReason, EpisodeReport, Metric, RejectCount, StatsReport};
 pub use topics::{NodeId, Role, RunId, Topic};

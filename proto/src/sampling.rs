@@ -19,6 +19,9 @@ use crate::experience::Transitions;
 /// longer, or a held request looks like silence. Here because both sides of the exchange read it.
 pub const DEFAULT_REQUEST_DEADLINE_MS: u64 = 1000;
 
+/// The replay server's transition widths when its run file names none: Ant-v5's.
+pub const DEFAULT_TRANSITION_DIMS: (u32, u32) = (105, 8);
+
 /// Query payload on `replay/sample`: the learner asks for one batch.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SampleRequest {

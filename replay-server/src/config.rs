@@ -77,8 +77,8 @@ pub struct ReplayServerConfig {
 impl Default for ReplayServerConfig {
     fn default() -> Self {
         Self {
-            obs_dim: 105,
-            act_dim: 8,
+            obs_dim: proto::DEFAULT_TRANSITION_DIMS.0,
+            act_dim: proto::DEFAULT_TRANSITION_DIMS.1,
             buffer: ReplayConfig::default(),
             initial_priority: InitialPriority::TdError,
             min_size_to_sample: 10_000,

@@ -123,6 +123,7 @@ impl Environment for AntRllab {
             terminated: !alive,
             truncated,
             terms: RewardTerms::new(&[x_velocity, x_velocity, -ctrl_cost, -contact_cost, SURVIVE_REWARD]),
+            goal: None,
         })
     }
 }

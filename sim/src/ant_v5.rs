@@ -20,19 +20,30 @@ const MAX_EPISODE_STEPS: u32 = 1000;
 pub const REWARD_TERMS: &[&str] =
     &["x_velocity", "reward_forward", "reward_ctrl", "reward_contact", "reward_survive"];
 
-/// Gymnasium Ant-v5: 105-d observation (qpos[2:], qvel, clipped cfrc_ext of bodies 1..13), 8 torques.
+/// Gymnasium Ant-v5: 105-d observation (qpos[2:], qvel, clipped cfrc_ext of bodies 1..13), 8 torques;
+/// or, as task `ant-v5-xy`, Ant-v5 with `exclude_current_positions_from_observation=False`: the
+/// torso's x, y lead a 107-d observation (HER's position goals need them).
 #[derive(Debug)]
 pub struct AntV5 {
     episode: Episode,
+    /// Observation starts at qpos[0] (`ant-v5-xy`) instead of qpos[2].
+    first_qpos: usize,
 }
 
 impl AntV5 {
     /// A new Ant whose reset noise starts at `seed`. Call [`Environment::reset`] before stepping.
     pub fn new(seed: u64) -> Result<Self, EnvError> {
+        Self::with_positions(seed, false)
+    }
+
+    /// Ant-v5 whose observation includes the torso's x, y (`include_positions`, task `ant-v5-xy`)
+    /// or leaves them out (Gymnasium's default, task `ant-v5`).
+    pub fn with_positions(seed: u64, include_positions: bool) -> Result<Self, EnvError> {
         let physics = Physics::load("ant-v5", &ant_mjcf(AntVariant::V5)?)?;
+        let first_qpos = if include_positions { 0 } else { 2 };
         let spec = EnvSpec {
-            name: "ant-v5",
-            obs_dim: (physics.nq() - 2) + physics.nv() + 13 * 6,
+            name: if include_positions { "ant-v5-xy" } else { "ant-v5" },
+            obs_dim: (physics.nq() - first_qpos) + physics.nv() + 13 * 6,
             act_dim: 8,
             action_low: vec![-1.0; 8],
             action_high: vec![1.0; 8],
@@ -42,7 +53,7 @@ impl AntV5 {
             nv: physics.nv(),
             reward_terms: REWARD_TERMS,
         };
-        Ok(Self { episode: Episode::new(physics, spec, seed) })
+        Ok(Self { episode: Episode::new(physics, spec, seed), first_qpos })
     }
 
     fn clipped_contact_forces(&self) -> impl Iterator<Item = f64> + '_ {
@@ -53,7 +64,7 @@ impl AntV5 {
     fn observation(&self) -> Vec<f64> {
         let data = self.episode.physics.data();
         let mut obs = Vec::with_capacity(self.episode.spec.obs_dim);
-        obs.extend_from_slice(&data.qpos()[2..]);
+        obs.extend_from_slice(&data.qpos()[self.first_qpos..]);
         obs.extend_from_slice(data.qvel());
         // Row 0 is the world body, always zero: Ant-v5 leaves it out of the observation.
         obs.extend(self.clipped_contact_forces().skip(6));
@@ -114,6 +125,7 @@ impl Environment for AntV5 {
             terminated: !healthy,
             truncated,
             terms: RewardTerms::new(&[x_velocity, forward_reward, -ctrl_cost, -contact_cost, healthy_reward]),
+            goal: None,
         })
     }
 }

@@ -3,6 +3,9 @@ use thiserror::Error;
 /// Why an environment refused a call.
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum EnvError {
+    /// A task's settings do not fit it (for example a goal the observation has no slice for).
+    #[error("{0}")]
+    Config(String),
     /// The action has the wrong number of components.
     #[error("action has {found} components, the task expects {expected}")]
     ActionDim {

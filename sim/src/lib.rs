@@ -4,7 +4,10 @@
 //! |---|---|---|
 //! | `ant-v5` | [`ant_v5`] | Gymnasium Ant-v5 exactly (RK4, dt 0.01 × 5, 105-d observation) |
 //! | `ant-rllab` | [`ant_rllab`] | the dissertation's rllab Ant (dt 0.02, actions ×150, 125-d observation) |
+//! | `ant-v5-xy` | [`ant_v5`] | Ant-v5 with `exclude_current_positions_from_observation=False` (107-d) |
 //! | `inverted-pendulum` | [`pendulum`] | Gymnasium InvertedPendulum-v5, for quick learning checks |
+//!
+//! [`her`] makes any of them goal-conditioned (hindsight experience replay).
 //!
 //! Both Ant tasks load one MJCF file, `assets/ant.xml` ([`ant_model`]); [`physics`] owns the MuJoCo
 //! model/data pair and the process-wide MuJoCo set-up. Start reading at [`Environment`] and [`Task`].
@@ -20,6 +23,7 @@ pub mod ant_rllab;
 pub mod ant_v5;
 mod episode;
 mod error;
+pub mod her;
 mod numpy;
 pub mod pendulum;
 pub mod physics;

@@ -73,6 +73,13 @@ impl Environment for InvertedPendulum {
         let terminated = !observation.iter().all(|v| v.is_finite()) || observation[1].abs() > MAX_ANGLE;
         let reward = if terminated { 0.0 } else { 1.0 };
         let truncated = self.episode.tick();
-        Ok(Step { observation, reward, terminated, truncated, terms: RewardTerms::new(&[reward]) })
+        Ok(Step {
+            observation,
+            reward,
+            terminated,
+            truncated,
+            terms: RewardTerms::new(&[reward]),
+            goal: None,
+        })
     }
 }

@@ -73,6 +73,8 @@ pub struct Step {
     pub truncated: bool,
     /// The reward's parts, as the reference reports them.
     pub terms: RewardTerms,
+    /// With a goal ([`crate::her::GoalEnv`]): where the step got relative to the episode's goal.
+    pub goal: Option<crate::her::GoalStatus>,
 }
 
 /// An exact physical state to start an episode from: the full `qpos` followed by the full `qvel`.

@@ -8,6 +8,8 @@ use crate::{EnvError, Environment, ant_rllab::AntRllab, ant_v5::AntV5, pendulum:
 pub enum Task {
     /// Gymnasium Ant-v5.
     AntV5,
+    /// Gymnasium Ant-v5 with `exclude_current_positions_from_observation=False` (107-d).
+    AntV5Xy,
     /// The dissertation's rllab Ant.
     AntRllab,
     /// Gymnasium InvertedPendulum-v5.
@@ -16,12 +18,13 @@ pub enum Task {
 
 impl Task {
     /// Every task, in a stable order.
-    pub const ALL: [Task; 3] = [Task::AntV5, Task::AntRllab, Task::InvertedPendulum];
+    pub const ALL: [Task; 4] = [Task::AntV5, Task::AntV5Xy, Task::AntRllab, Task::InvertedPendulum];
 
     /// The task's name on the command line and in configs.
     pub fn name(self) -> &'static str {
         match self {
             Task::AntV5 => "ant-v5",
+            Task::AntV5Xy => "ant-v5-xy",
             Task::AntRllab => "ant-rllab",
             Task::InvertedPendulum => "inverted-pendulum",
         }
@@ -31,6 +34,7 @@ impl Task {
     pub fn make(self, seed: u64) -> Result<Box<dyn Environment>, EnvError> {
         Ok(match self {
             Task::AntV5 => Box::new(AntV5::new(seed)?),
+            Task::AntV5Xy => Box::new(AntV5::with_positions(seed, true)?),
             Task::AntRllab => Box::new(AntRllab::new(seed)?),
             Task::InvertedPendulum => Box::new(InvertedPendulum::new(seed)?),
         })

@@ -8,6 +8,21 @@ fn make(task: Task) -> Box<dyn Environment> {
 }
 
 #[test]
+fn ant_v5_xy_is_ant_v5_with_the_torso_position_in_front() {
+    // Gymnasium's exclude_current_positions_from_observation=False: obs = qpos ++ the rest, and the
+    // same dynamics, rewards and terminations.
+    let (mut plain, mut xy) = (make(Task::AntV5), make(Task::AntV5Xy));
+    let (a, b) = (plain.reset(Some(4)), xy.reset(Some(4)));
+    assert_eq!(&b[2..], &a[..]);
+    for t in 0..50 {
+        let action: Vec<f64> = (0..8).map(|i| ((t * 8 + i) as f64 * 0.37).sin()).collect();
+        let (s, sx) = (plain.step(&action).unwrap(), xy.step(&action).unwrap());
+        assert_eq!(&sx.observation[2..], &s.observation[..], "step {t}");
+        assert_eq!((sx.reward, sx.terminated, sx.truncated), (s.reward, s.terminated, s.truncated));
+    }
+}
+
+#[test]
 fn specs_have_the_reference_dimensions() {
     let dims: Vec<_> = Task::ALL
         .iter()
@@ -18,7 +33,12 @@ fn specs_have_the_reference_dimensions() {
         .collect();
     assert_eq!(
         dims,
-        [("ant-v5", 105, 8, 15, 14), ("ant-rllab", 125, 8, 15, 14), ("inverted-pendulum", 4, 1, 2, 2)]
+        [
+            ("ant-v5", 105, 8, 15, 14),
+            ("ant-v5-xy", 107, 8, 15, 14),
+            ("ant-rllab", 125, 8, 15, 14),
+            ("inverted-pendulum", 4, 1, 2, 2)
+        ]
     );
     assert!((make(Task::AntV5).spec().dt - 0.05).abs() < 1e-12);
     assert!((make(Task::AntRllab).spec().dt - 0.02).abs() < 1e-12);

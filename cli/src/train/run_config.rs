@@ -1,4 +1,5 @@
-//! One run file, three tables: `[train]` (the loop), `[agent]` (SAC-LSP), `[replay]` (the buffer).
+//! One run file, its tables: `[train]` (the loop), `[agent]` (SAC-LSP), `[replay]` (the buffer),
+//! `[hierarchy]` (frozen levels below), `[her]` (goals).
 //! The distributed roles read the same file, so network shapes cannot drift between processes.
 
 use std::path::Path;
@@ -20,6 +21,8 @@ pub struct RunConfig {
     pub replay: ReplayConfig,
     /// Frozen levels below the trained one (`[hierarchy]`); none by default.
     pub hierarchy: node::HierarchyKeys,
+    /// Hindsight experience replay (`[her]`); off by default.
+    pub her: sim::her::HerConfig,
 }
 
 impl RunConfig {
@@ -42,6 +45,7 @@ impl RunConfig {
             agent,
             replay: parse_table(&text, path, "replay")?,
             hierarchy,
+            her: parse_table(&text, path, "her")?,
         };
         config.fitted()
     }
@@ -50,7 +54,9 @@ impl RunConfig {
     pub fn fitted(mut self) -> Result<Self> {
         self.train.validate().map_err(anyhow::Error::msg)?;
         let task = self.train.task().map_err(anyhow::Error::msg)?;
-        let spec = task.make(0)?.spec().clone();
+        self.her.validate(task, self.agent.n_step).map_err(anyhow::Error::msg)?;
+        // With HER the networks' input is observation ++ goal.
+        let spec = self.her.make(task, 0)?.spec().clone();
         self.agent.obs_dim = spec.obs_dim;
         self.agent.act_dim = spec.act_dim;
         self.agent.validate().context("[agent]")?;
