@@ -333,13 +333,7 @@ fn critic_variants(
         }
         learners.push((name, learner, b, Vec::new()));
     }
-    for _ in 0..runs {
-        for (_, learner, b, rates) in &mut learners {
-            rates.push(rate(1, per_window, threads == 1, || {
-                learner.update(b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
-            }));
-        }
-    }
+    interleave(&mut learners, runs, per_window, threads == 1, |l, b| l.update(b).map(drop));
     let scalar = merge(&learners[0].3).wall.1;
     for (name, _, _, rates) in &learners {
         let r = merge(rates);
@@ -347,6 +341,24 @@ fn critic_variants(
         println!("    median ratio to the scalar critic on candle: {:.2}", r.wall.1 / scalar);
     }
     Ok(())
+}
+
+/// `runs` rounds of one window of `per_window` updates of each learner in turn, so a change in the
+/// machine's load hits them all alike; each window's rates go to the learner's list.
+fn interleave<T, L>(
+    learners: &mut [(T, L, Batch, Vec<Rates>)],
+    runs: usize,
+    per_window: usize,
+    single_thread: bool,
+    update: impl Fn(&mut L, &Batch) -> agent::Result<()>,
+) {
+    for _ in 0..runs {
+        for (_, learner, b, rates) in learners.iter_mut() {
+            rates.push(rate(1, per_window, single_thread, || {
+                update(learner, b).unwrap_or_else(|e| panic!("update failed: {e}"));
+            }));
+        }
+    }
 }
 
 /// The default configuration's fused update at other batch sizes, interleaved: the learner's
@@ -368,13 +380,7 @@ fn batch_sweep(
         }
         learners.push((size, fused, b, Vec::new()));
     }
-    for _ in 0..runs {
-        for (_, fused, b, rates) in &mut learners {
-            rates.push(rate(1, per_window, threads == 1, || {
-                fused.update(b).map(drop).unwrap_or_else(|e| panic!("update failed: {e}"));
-            }));
-        }
-    }
+    interleave(&mut learners, runs, per_window, threads == 1, |l, b| l.update(b).map(drop));
     println!();
     for (size, _, _, rates) in &learners {
         let median = merge(rates).wall.1;

@@ -47,15 +47,33 @@ pub(crate) fn categorical_losses(
     q_pi_mean: &Tensor,
     v_mean: &Tensor,
 ) -> Result<CriticLosses> {
-    let support = Support::new(&cfg.categorical);
     // The Q target moves V-bar's atoms to scale r + gamma^n (1 - d) z_j.
-    let shifts: Vec<f64> = batch.rewards.iter().map(|r| f64::from(cfg.scale_reward * r)).collect();
     let gamma = f64::from(cfg.bootstrap_discount());
-    let scales: Vec<f64> = batch.terminated.iter().map(|d| gamma * (1.0 - f64::from(*d))).collect();
+    let inputs = Inputs {
+        nets,
+        support: Support::new(&cfg.categorical),
+        b,
+        pi,
+        shifts: batch.rewards.iter().map(|r| f64::from(cfg.scale_reward * r)).collect(),
+        scales: batch.terminated.iter().map(|d| gamma * (1.0 - f64::from(*d))).collect(),
+    };
     match cfg.categorical.variant {
-        CategoricalVariant::SoftC51 => soft_c51(nets, &support, b, pi, &shifts, &scales, q_pi_mean, v_mean),
-        CategoricalVariant::Dissertation => dissertation(nets, &support, b, pi, &shifts, &scales),
+        CategoricalVariant::SoftC51 => soft_c51(&inputs, q_pi_mean, v_mean),
+        CategoricalVariant::Dissertation => dissertation(&inputs),
     }
+}
+
+/// What both variants read: the networks, the support, the batch, the policy's samples, and the
+/// Q target's move of the atoms, z_j -> shifts_i + scales_i z_j per row i.
+struct Inputs<'a> {
+    nets: &'a Networks,
+    support: Support,
+    b: &'a BatchTensors,
+    pi: &'a PolicyTerms<'a>,
+    /// scale r per row.
+    shifts: Vec<f64>,
+    /// gamma^n (1 - d) per row.
+    scales: Vec<f64>,
 }
 
 /// Cross-entropy -sum_i m_i log p_i per row of `[rows, atoms]`, IS-weighted, averaged.
@@ -72,17 +90,8 @@ pub(crate) fn cross_entropy(target: &Tensor, log_probs: &Tensor, weights: Option
 /// entropy terms alpha (log p(a~) - log pi(a~|s)), a~ ~ pi: the soft Bellman backup of the
 /// scalar critic applied atom by atom (for a point mass, the scalar targets exactly). Both by
 /// cross-entropy; the policy reads the distributions' means.
-#[allow(clippy::too_many_arguments)]
-fn soft_c51(
-    nets: &Networks,
-    support: &Support,
-    b: &BatchTensors,
-    pi: &PolicyTerms,
-    shifts: &[f64],
-    scales: &[f64],
-    q_pi_mean: &Tensor,
-    v_mean: &Tensor,
-) -> Result<CriticLosses> {
+fn soft_c51(inputs: &Inputs, q_pi_mean: &Tensor, v_mean: &Tensor) -> Result<CriticLosses> {
+    let Inputs { nets, support, b, pi, shifts, scales } = inputs;
     let (n, atoms, dev) = (shifts.len(), support.atoms(), &Device::Cpu);
     let next = rows(&nets.v_target.model.probs(&b.next_observations)?)?;
     let q_target = Tensor::from_vec(support.project(&next, shifts, scales), (n, atoms), dev)?;
@@ -121,14 +130,8 @@ fn bracket_sum(brackets: &Brackets, probs: &Tensor) -> Result<Tensor> {
 /// scale r + gamma (1 - d) f(V-bar(s')), V regresses f(V(s)) on f(Q(s, a~)) - log pi + log p, and the
 /// policy's likelihood ratio uses f(Q(s, a~)) and f(V(s)) in place of Q and V. f is not an
 /// expectation of anything, which is why the variant cannot learn; it is kept to reproduce that.
-fn dissertation(
-    nets: &Networks,
-    support: &Support,
-    b: &BatchTensors,
-    pi: &PolicyTerms,
-    shifts: &[f64],
-    scales: &[f64],
-) -> Result<CriticLosses> {
+fn dissertation(inputs: &Inputs) -> Result<CriticLosses> {
+    let Inputs { nets, support, b, pi, shifts, scales } = inputs;
     let brackets = support.dissertation_brackets(shifts, scales);
     let dev = &Device::Cpu;
     let next = bracket_sum(&brackets, &nets.v_target.model.probs(&b.next_observations)?)?.detach();

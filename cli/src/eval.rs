@@ -324,6 +324,11 @@ mod tests {
 
     use super::*;
 
+    /// `run_episodes` on the pendulum without goals.
+    fn pendulum_episodes(args: &EvalArgs, policy: &Policy) -> Vec<Episode> {
+        run_episodes(args, Task::InvertedPendulum, &HerConfig::default(), policy).unwrap()
+    }
+
     /// A tiny inverted-pendulum learner's checkpoint, written to a fresh folder.
     fn checkpoint(name: &str, twin_q: bool) -> PathBuf {
         let dir = std::env::temp_dir().join(format!("sac-lsp-eval-{name}-{}", std::process::id()));
@@ -361,12 +366,8 @@ mod tests {
         assert_eq!((policy.config.obs_dim, policy.config.act_dim, policy.config.twin_q), (4, 1, true));
         assert_eq!(policy.learner_step, Some(0));
         for latent in [Latent::Fixed, Latent::Zero, Latent::Stochastic] {
-            let one =
-                run_episodes(&args(&path, latent, 1), Task::InvertedPendulum, &HerConfig::default(), &policy)
-                    .unwrap();
-            let three =
-                run_episodes(&args(&path, latent, 3), Task::InvertedPendulum, &HerConfig::default(), &policy)
-                    .unwrap();
+            let one = pendulum_episodes(&args(&path, latent, 1), &policy);
+            let three = pendulum_episodes(&args(&path, latent, 3), &policy);
             assert_eq!(one, three, "{latent:?}");
             assert_eq!(one.len(), 6);
             assert!(one.iter().all(|e| e.length >= 1 && e.episode_return.is_finite()));
@@ -420,20 +421,8 @@ mod tests {
         let policy = read_policy(&path, None).unwrap();
         assert_eq!(policy.frozen.len(), 1);
         assert!(!policy.config.squash && !policy.config.embedding_output_relu, "the level-above settings");
-        let one = run_episodes(
-            &args(&path, Latent::Fixed, 1),
-            Task::InvertedPendulum,
-            &HerConfig::default(),
-            &policy,
-        )
-        .unwrap();
-        let two = run_episodes(
-            &args(&path, Latent::Fixed, 2),
-            Task::InvertedPendulum,
-            &HerConfig::default(),
-            &policy,
-        )
-        .unwrap();
+        let one = pendulum_episodes(&args(&path, Latent::Fixed, 1), &policy);
+        let two = pendulum_episodes(&args(&path, Latent::Fixed, 2), &policy);
         assert_eq!(one, two);
         assert!(one.iter().all(|e| e.length >= 1 && e.episode_return.is_finite()));
         // A plain top-level file with the frozen level named by a run file evaluates the same.
@@ -443,13 +432,7 @@ mod tests {
         std::fs::write(&run_file, format!("[hierarchy]\nlevels = [{:?}]\n", low.display().to_string()))
             .unwrap();
         let named = read_policy(&plain, Some(&read_run_file(&run_file).unwrap())).unwrap();
-        let again = run_episodes(
-            &args(&plain, Latent::Fixed, 1),
-            Task::InvertedPendulum,
-            &HerConfig::default(),
-            &named,
-        )
-        .unwrap();
+        let again = pendulum_episodes(&args(&plain, Latent::Fixed, 1), &named);
         assert_eq!(one, again);
     }
 

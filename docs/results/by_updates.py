@@ -8,18 +8,9 @@ evaluations in that bin. Returns are the task's own reward (also for HER runs).
 """
 
 import argparse
-import gzip
-import json
 import statistics
 
-
-def lines(path):
-    opener = gzip.open if path.endswith(".gz") else open
-    with opener(path, "rt") as f:
-        for line in f:
-            line = line.strip()
-            if line:
-                yield json.loads(line)
+from windows import lines  # the monitor record's reader, beside this script
 
 
 def curve(path, width):
