@@ -99,7 +99,7 @@ pub use losses::{
 pub use mlp::{Activation, BiasInit, Dense, Grad, Mlp, MlpSpec, xavier_limit};
 pub use nstep::{NStepReturns, NStepTransition, StepEnd};
 pub use optim::{Adam, AdamConfig};
-pub use params::{Checkpoint, ParamSnapshot};
+pub use params::{Checkpoint, ParamSnapshot, saved_learner_step};
 pub use policy::{BijectorOutput, LatentPolicy, PolicySample};
 pub use schema::{Schema, networks_from_schema, snapshot_schema};
 pub use stack::{FROZEN_PREFIX, Level, PolicyStack};

@@ -117,6 +117,12 @@ pub(crate) fn decode(bytes: &[u8]) -> Result<HashMap<String, Tensor>> {
 }
 
 /// A scalar i64 tensor from `tensors[key]`.
+/// The learner step a snapshot's or checkpoint's tensors were saved at (`learner.step`), if they
+/// say (and it is not negative).
+pub fn saved_learner_step(tensors: &HashMap<String, Tensor>) -> Option<u64> {
+    read_i64(tensors, "learner.step").ok().and_then(|step| u64::try_from(step).ok())
+}
+
 pub(crate) fn read_i64(tensors: &HashMap<String, Tensor>, key: &str) -> Result<i64> {
     let t = tensors.get(key).ok_or_else(|| Error::BadSnapshot(format!("missing tensor {key}")))?;
     t.to_vec1::<i64>()?.first().copied().ok_or_else(|| Error::BadSnapshot(format!("{key} is empty")))

@@ -19,7 +19,7 @@ use sha3::{Digest, Sha3_256};
 use crate::config::AgentConfig;
 use crate::error::{Error, Result};
 use crate::networks::{Net, policy_net};
-use crate::params::{Checkpoint, ParamSnapshot, decode, encode, read_i64};
+use crate::params::{Checkpoint, ParamSnapshot, decode, encode, saved_learner_step};
 use crate::policy::LatentPolicy;
 use crate::schema::{Schema, networks_from_schema, snapshot_schema};
 use crate::vars::SeededInit;
@@ -47,7 +47,7 @@ impl Level {
         let tensors = decode(bytes)?;
         let schema: Schema = tensors.iter().map(|(name, t)| (name.clone(), t.dims().to_vec())).collect();
         let config = networks_from_schema(&schema, &AgentConfig::default_at_level(index))?;
-        let version = read_i64(&tensors, "learner.step").map_or(0, |step| step.max(0) as u64);
+        let version = saved_learner_step(&tensors).unwrap_or(0);
         Ok(Level { config, snapshot: ParamSnapshot { version, safetensors: bytes.to_vec() } })
     }
 }

@@ -177,10 +177,7 @@ fn read_policy(path: &Path, run_file: Option<&RunFile>) -> Result<Policy> {
     let schema: Schema = tensors.iter().map(|(name, t)| (name.clone(), t.dims().to_vec())).collect();
     let config = agent::networks_from_schema(&schema, &base)
         .map_err(|e| anyhow::anyhow!("{} holds no SAC-LSP policy: {e}", path.display()))?;
-    let learner_step = tensors
-        .get("learner.step")
-        .and_then(|t| t.flatten_all().ok()?.to_vec1::<i64>().ok()?.first().copied())
-        .and_then(|step| u64::try_from(step).ok());
+    let learner_step = agent::saved_learner_step(&tensors);
     let policy = Policy { config, snapshot, learner_step, frozen };
     // Fails here, with the file named, if the levels do not chain.
     policy.actor(0).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
