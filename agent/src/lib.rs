@@ -102,7 +102,7 @@ pub use optim::{Adam, AdamConfig};
 pub use params::{Checkpoint, ParamSnapshot, saved_learner_step};
 pub use policy::{BijectorOutput, LatentPolicy, PolicySample};
 pub use schema::{Schema, networks_from_schema, snapshot_schema};
-pub use stack::{FROZEN_PREFIX, Level, PolicyStack};
+pub use stack::{FROZEN_PREFIX, Level, MAX_FROZEN_LEVELS, PolicyStack};
 pub use target::polyak_update;
 
 #[cfg(test)]

@@ -28,6 +28,10 @@ use crate::vars::SeededInit;
 /// (`frozen.<k>.<name>`, k = 0 at the bottom).
 pub const FROZEN_PREFIX: &str = "frozen";
 
+/// The most frozen levels a checkpoint may embed: the wire's limit (`proto::MAX_FROZEN_LEVELS`;
+/// this crate stays off the wire, so the executor's tests check that the two agree).
+pub const MAX_FROZEN_LEVELS: usize = 16;
+
 /// A trained level to freeze: its configuration and a snapshot holding its networks (a learner's
 /// snapshot or checkpoint; Adam moments and counters in it are ignored).
 #[derive(Clone, Debug)]
@@ -132,8 +136,10 @@ impl PolicyStack {
                 .split_once('.')
                 .and_then(|(k, inner)| Some((k.parse::<usize>().ok()?, inner)))
                 .ok_or_else(|| Error::BadStack(format!("tensor {name} is not frozen.<level>.<name>")))?;
-            if k >= 16 {
-                return Err(Error::BadStack(format!("tensor {name}: at most 16 frozen levels")));
+            if k >= MAX_FROZEN_LEVELS {
+                return Err(Error::BadStack(format!(
+                    "tensor {name}: at most {MAX_FROZEN_LEVELS} frozen levels"
+                )));
             }
             if levels.len() <= k {
                 levels.resize_with(k + 1, Vec::new);

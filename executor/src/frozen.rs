@@ -94,6 +94,11 @@ mod tests {
     }
 
     #[test]
+    fn a_checkpoint_embeds_no_more_levels_than_the_wire_carries() {
+        assert_eq!(agent::MAX_FROZEN_LEVELS, proto::MAX_FROZEN_LEVELS);
+    }
+
+    #[test]
     fn a_reply_must_hash_to_what_it_claims_and_have_the_run_s_depth() {
         let levels = vec![level(1)];
         let hash = PolicyStack::from_weights(&[&levels[0].safetensors]).unwrap().content_hash().unwrap();
