@@ -108,8 +108,8 @@ place_learner_threads "${pids[-1]}"
 for ((i = 0; i < n; i++)); do
     start_executor "$i"
 done
-start monitor "${rest[@]}" "$bin/sac-lsp" monitor --run-id "$run_id" "${peer[@]}" --out "$dir/monitor.jsonl" --quiet
-echo "local.sh: live view: $bin/sac-lsp monitor --run-id $run_id --connect $hub --out $dir/view.jsonl" >&2
+start monitor "${rest[@]}" "$bin/sac-lsp" monitor --run-id "$run_id" "${peer[@]}" --out "$dir/monitor.jsonl"
+echo "local.sh: live view: $bin/sac-lsp monitor --run-id $run_id --connect $hub --out $dir/view.jsonl --no-tensorboard" >&2
 
 deadline=""
 [[ -n ${MINUTES:-} ]] && deadline=$(($(date +%s) + ${MINUTES%.*} * 60))

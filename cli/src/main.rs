@@ -10,6 +10,7 @@ mod eval;
 mod monitor;
 mod plot;
 mod rollout;
+mod tensorboard;
 mod train;
 
 /// Distributed SAC-LSP tools.

@@ -58,7 +58,8 @@ pub struct LossMeans {
 }
 
 impl LossMeans {
-    fn add(&mut self, m: &agent::Metrics) {
+    /// Adds one update's diagnostics to the sums.
+    pub fn add(&mut self, m: &agent::Metrics) {
         self.n += 1;
         self.q_loss += f64::from(m.q_loss);
         self.v_loss += f64::from(m.v_loss);
@@ -68,7 +69,8 @@ impl LossMeans {
         self.temperature += f64::from(m.temperature);
     }
 
-    fn means(&self) -> LossMeans {
+    /// The means of the sums (zeros when nothing was added; `n` says how many were).
+    pub fn means(&self) -> LossMeans {
         let n = self.n.max(1) as f64;
         LossMeans {
             n: self.n,

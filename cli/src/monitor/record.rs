@@ -115,31 +115,3 @@ pub struct EvalRecord {
     /// Sum over executors of their newest known env steps when it arrived.
     pub env_steps_total: Option<u64>,
 }
-
-impl StartRecord {
-    /// The JSON line (no newline).
-    pub fn to_json(&self) -> String {
-        Record::Start(self.clone()).to_json()
-    }
-}
-
-impl EpisodeRecord {
-    /// The JSON line (no newline).
-    pub fn to_json(&self) -> String {
-        Record::Episode(self.clone()).to_json()
-    }
-}
-
-impl EvalRecord {
-    /// The JSON line (no newline).
-    pub fn to_json(&self) -> String {
-        Record::Eval(self.clone()).to_json()
-    }
-}
-
-impl Tick {
-    /// The JSON line (no newline).
-    pub fn to_json(&self) -> String {
-        Record::Tick(self.clone()).to_json()
-    }
-}

@@ -35,6 +35,8 @@ async fn records_what_a_run_publishes_and_plot_draws_it() {
             zenoh_cfg: Vec::new(),
         },
         out: Some(out.clone()),
+        tensorboard: None,
+        no_tensorboard: false,
         interval_ms: 100,
         duration_s: None,
         quiet: true,
@@ -82,6 +84,16 @@ async fn records_what_a_run_publishes_and_plot_draws_it() {
     let garbage = last.get("undecodable").and_then(|u| u.get("stats")).and_then(Value::as_u64);
     assert!(garbage.is_some_and(|n| n >= 20), "{garbage:?}");
     assert_eq!(last.get("undecodable").and_then(|u| u.get("episodes")).and_then(Value::as_u64), Some(0));
+
+    // TensorBoard beside the record holds the same episodes and evaluations.
+    let boards: Vec<_> =
+        std::fs::read_dir(dir.join("run/tensorboard")).unwrap().map(|e| e.unwrap().path()).collect();
+    assert_eq!(boards.len(), 1, "{boards:?}");
+    let events = crate::tensorboard::read::events(&boards[0]);
+    let tagged = |tag: &str| events.iter().filter(|e| e.scalars.iter().any(|(t, _)| t == tag)).count();
+    assert_eq!(tagged("train/episode_return"), of_type("episode"));
+    assert_eq!(tagged("eval/fixed_latent/return_mean"), of_type("eval"));
+    assert!(tagged("learner/q_loss") >= 1);
 
     crate::plot::run(&crate::plot::PlotArgs { input: out.clone(), out_dir: None }).unwrap();
     for name in ["return_vs_env_steps.png", "return_vs_wall_clock.png", "updates_per_s.png"] {

@@ -20,6 +20,27 @@ pub fn render(state: &MonitorState, tick: &Tick) -> String {
     s
 }
 
+/// One plain status line for logs and pipes (no terminal control): the figures of the screen's
+/// first lines, the dead and the blocked.
+pub fn line(state: &MonitorState, tick: &Tick) -> String {
+    let learner = |name: &str| state.role_metric(Role::Learner, name);
+    let dead = tick.executors.iter().filter(|e| e.alive == Some(false)).count();
+    let eval = state.last_eval().map(|e| e.mean_return);
+    format!(
+        "up {} | learner step {} {} updates/s | env steps {} {}/s | replay {} | executors {} ({dead} dead, {} blocked entries) | recent return {} | eval {}",
+        clock(tick.now.elapsed_s),
+        int(tick.learner_step),
+        num(learner("learner/updates_per_s")),
+        int(tick.env_steps_total),
+        num(tick.env_steps_per_s_total),
+        num(tick.replay_size),
+        tick.executors.len(),
+        tick.blocked.len(),
+        num(state.recent_return().map(|r| r.mean)),
+        num(eval),
+    )
+}
+
 fn write_screen(s: &mut String, state: &MonitorState, tick: &Tick) -> std::fmt::Result {
     let learner = |name: &str| state.role_metric(Role::Learner, name);
     let replay = |name: &str| state.role_metric(Role::Replay, name);

@@ -108,15 +108,16 @@ mod tests {
     #[test]
     fn reads_back_what_the_monitor_writes() {
         let mut state = MonitorState::new(fixtures::run());
-        let mut lines =
-            vec![StartRecord { unix_ms: at(0.0).unix_ms, run_id: fixtures::RUN.into() }.to_json()];
-        lines.push(state.tick(at(0.5)).to_json());
+        let mut lines = vec![
+            Record::Start(StartRecord { unix_ms: at(0.0).unix_ms, run_id: fixtures::RUN.into() }).to_json(),
+        ];
+        lines.push(Record::Tick(state.tick(at(0.5))).to_json());
         state.on_stats(&fixtures::learner());
         state.on_stats(&fixtures::executor(0, 3000.0, 100.0, false));
         let episode = state.on_episode(at(1.0), &fixtures::episode(0, 2, 321.5, 3100)).unwrap();
-        lines.push(episode.to_json());
-        lines.push(state.on_eval(at(1.5), &fixtures::eval(1, 1111.25)).unwrap().to_json());
-        lines.push(state.tick(at(2.0)).to_json());
+        lines.push(Record::Episode(episode).to_json());
+        lines.push(Record::Eval(state.on_eval(at(1.5), &fixtures::eval(1, 1111.25)).unwrap()).to_json());
+        lines.push(Record::Tick(state.tick(at(2.0))).to_json());
         // A line cut off mid-write, and a record type from a future monitor.
         lines.push("{\"type\":\"tick\",\"unix_ms\":17".into());
         lines.push("{\"type\":\"future\",\"unix_ms\":1}".into());

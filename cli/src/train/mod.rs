@@ -1,5 +1,6 @@
 //! `sac-lsp train`: single-machine SAC-LSP (the dissertation's "SAC-LSP" and "Prioritized SAC-LSP"
-//! runs) on any task, with per-epoch metrics and periodic checkpoints.
+//! runs) on any task, with per-epoch metrics (`metrics.csv` and TensorBoard events under
+//! `tensorboard/`) and periodic checkpoints.
 
 mod config;
 mod record;
@@ -13,6 +14,8 @@ use anyhow::{Context, Result};
 use clap::Args;
 pub use config::TrainConfig;
 use record::MetricsFile;
+
+use crate::tensorboard::EventWriter;
 pub use run_config::RunConfig;
 pub use trainer::Trainer;
 
@@ -59,6 +62,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         .with_context(|| format!("creating {}", out.display()))?;
     std::fs::write(out.join("config.txt"), format!("{config:#?}\n"))?;
     let mut metrics = MetricsFile::create(&out.join("metrics.csv"))?;
+    let mut board = EventWriter::create(&out.join("tensorboard"), unix_s())?;
     tracing::info!(out = %out.display(), task = %config.train.task, epochs = config.train.epochs, "training");
 
     let started = Instant::now();
@@ -67,6 +71,8 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     for epoch in 0..epochs {
         let record = trainer.run_epoch()?;
         metrics.append(&record)?;
+        board.write(unix_s(), record.env_steps, &record.scalars())?;
+        board.flush()?;
         tracing::info!(
             epoch,
             env_steps = record.env_steps,
@@ -87,6 +93,10 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+fn unix_s() -> f64 {
+    node::unix_ms() as f64 / 1000.0
 }
 
 /// Writes `checkpoints/epoch-<n>.safetensors` atomically and durably (`node::durable`).

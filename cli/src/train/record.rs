@@ -5,6 +5,9 @@ use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use anyhow::{Context, Result};
+use learner::LossMeans;
+
+use crate::tensorboard::Scalar;
 
 /// One epoch's figures.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -37,10 +40,12 @@ pub struct EpochRecord {
     pub mean_log_prob: f64,
     /// Mean Q(s, a) of the batches.
     pub mean_q: f64,
+    /// Mean temperature α of the updates (fixed unless the run tunes it).
+    pub temperature: f64,
 }
 
 const HEADER: &str = "epoch,env_steps,updates,wall_s,eval_return,eval_length,train_return,updates_per_s,\
-env_steps_per_s,q_loss,v_loss,policy_loss,mean_log_prob,mean_q";
+env_steps_per_s,q_loss,v_loss,policy_loss,mean_log_prob,mean_q,temperature";
 
 /// Appends [`EpochRecord`]s to `metrics.csv`, flushing each row so the file can be watched.
 #[derive(Debug)]
@@ -62,7 +67,7 @@ impl MetricsFile {
     pub fn append(&mut self, r: &EpochRecord) -> Result<()> {
         writeln!(
             self.out,
-            "{},{},{},{:.3},{},{},{},{:.1},{:.1},{},{},{},{},{}",
+            "{},{},{},{:.3},{},{},{},{:.1},{:.1},{},{},{},{},{},{}",
             r.epoch,
             r.env_steps,
             r.updates,
@@ -76,43 +81,43 @@ impl MetricsFile {
             r.v_loss,
             r.policy_loss,
             r.mean_log_prob,
-            r.mean_q
+            r.mean_q,
+            r.temperature
         )?;
         self.out.flush()?;
         Ok(())
     }
 }
 
-/// Running mean of the update metrics within an epoch.
-#[derive(Debug, Default, Clone)]
-pub struct LossMeans {
-    count: u64,
-    q_loss: f64,
-    v_loss: f64,
-    policy_loss: f64,
-    mean_log_prob: f64,
-    mean_q: f64,
-}
-
-impl LossMeans {
-    /// Adds one update's metrics.
-    pub fn add(&mut self, m: &agent::Metrics) {
-        self.count += 1;
-        self.q_loss += f64::from(m.q_loss);
-        self.v_loss += f64::from(m.v_loss);
-        self.policy_loss += f64::from(m.policy_loss);
-        self.mean_log_prob += f64::from(m.mean_log_prob);
-        self.mean_q += f64::from(m.mean_q);
+impl EpochRecord {
+    /// Fills the loss fields with the means of this epoch's updates (NaN when there were none).
+    pub fn fill_losses(&mut self, sums: &LossMeans) {
+        let means = sums.means();
+        let mean = |m: f64| if sums.n == 0 { f64::NAN } else { m };
+        self.q_loss = mean(means.q_loss);
+        self.v_loss = mean(means.v_loss);
+        self.policy_loss = mean(means.policy_loss);
+        self.mean_log_prob = mean(means.mean_log_prob);
+        self.mean_q = mean(means.mean_q);
+        self.temperature = mean(means.temperature);
     }
 
-    /// Fills the loss fields of `record` with the means (NaN when there were no updates).
-    pub fn fill(&self, record: &mut EpochRecord) {
-        let n = self.count as f64;
-        let mean = |sum: f64| if self.count == 0 { f64::NAN } else { sum / n };
-        record.q_loss = mean(self.q_loss);
-        record.v_loss = mean(self.v_loss);
-        record.policy_loss = mean(self.policy_loss);
-        record.mean_log_prob = mean(self.mean_log_prob);
-        record.mean_q = mean(self.mean_q);
+    /// The TensorBoard scalars of the epoch (at its env steps), named as the monitor names the
+    /// distributed run's, so the two compare in one TensorBoard.
+    pub fn scalars(&self) -> Vec<Scalar> {
+        vec![
+            Scalar::new("eval/fixed_latent/return_mean", self.eval_return),
+            Scalar::new("eval/fixed_latent/length_mean", self.eval_length),
+            Scalar::new("train/episode_return", self.train_return),
+            Scalar::new("run/updates_per_s", self.updates_per_s),
+            Scalar::new("run/env_steps_per_s", self.env_steps_per_s),
+            Scalar::new("run/learner_step", self.updates as f64),
+            Scalar::new("learner/q_loss", self.q_loss),
+            Scalar::new("learner/v_loss", self.v_loss),
+            Scalar::new("learner/policy_loss", self.policy_loss),
+            Scalar::new("learner/mean_log_prob", self.mean_log_prob),
+            Scalar::new("learner/mean_q", self.mean_q),
+            Scalar::new("learner/temperature", self.temperature),
+        ]
     }
 }

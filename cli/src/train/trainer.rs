@@ -13,7 +13,9 @@ use replay::{ReplayBuffer, SampledBatch, SamplingMode, TransitionBatch};
 use sim::Environment;
 use sim::her::Hindsight;
 
-use super::record::{EpochRecord, LossMeans};
+use learner::LossMeans;
+
+use super::record::EpochRecord;
 use super::run_config::RunConfig;
 
 pub use learner::Evaluation;
@@ -143,7 +145,7 @@ impl Trainer {
             env_steps_per_s: (self.env_steps - steps_before) as f64 / seconds,
             ..EpochRecord::default()
         };
-        losses.fill(&mut record);
+        record.fill_losses(&losses);
         self.epoch += 1;
         Ok(record)
     }

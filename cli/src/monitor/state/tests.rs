@@ -2,6 +2,7 @@ use proto::BarrierReport;
 
 use super::*;
 use crate::monitor::fixtures::{self, at};
+use crate::monitor::record::Record;
 use crate::monitor::view;
 use serde_json::Value;
 
@@ -50,7 +51,7 @@ fn an_empty_state_ticks_all_unknowns() {
     assert_eq!(t.env_steps_total, None);
     assert_eq!(t.env_steps_per_s_total, None);
     assert!(t.executors.is_empty() && t.blocked.is_empty());
-    let line = serde_json::from_str::<Value>(&t.to_json()).unwrap();
+    let line = serde_json::from_str::<Value>(&Record::Tick(t.clone()).to_json()).unwrap();
     for key in ["learner_step", "updates_per_s", "replay_size", "env_steps_total", "env_steps_per_s_total"] {
         assert_eq!(line.get(key), Some(&Value::Null), "{key}");
     }
@@ -112,7 +113,7 @@ fn a_barrier_report_counts_only_on_its_own_key() {
     let after = s.tick(at(2.0));
     assert_eq!(after.env_steps_total, before.env_steps_total);
     assert_eq!(after.executors.iter().map(|r| r.id).collect::<Vec<_>>(), [0, 1, 2], "no phantom row");
-    let line = serde_json::from_str::<Value>(&after.to_json()).unwrap();
+    let line = serde_json::from_str::<Value>(&Record::Tick(after.clone()).to_json()).unwrap();
     assert_eq!(line.get("undecodable").and_then(|u| u.get("barrier")).and_then(Value::as_u64), Some(2));
     // The same report on its own key counts.
     s.on_barrier(&fixtures::barrier_key(9), &barrier(9, 500));
@@ -166,7 +167,7 @@ fn undecodable_messages_are_counted_per_family() {
     assert_eq!(s.undecodable().get(Family::Liveliness), 2);
     assert_eq!(s.undecodable().get(Family::Episodes), 0);
     assert_eq!(s.received().get(Family::Stats), 7);
-    let line = serde_json::from_str::<Value>(&s.tick(at(1.0)).to_json()).unwrap();
+    let line = serde_json::from_str::<Value>(&Record::Tick(s.tick(at(1.0))).to_json()).unwrap();
     let undecodable = line.get("undecodable").unwrap();
     assert_eq!(undecodable.get("stats").and_then(Value::as_u64), Some(2));
     assert_eq!(undecodable.get("liveliness").and_then(Value::as_u64), Some(2));
@@ -177,7 +178,7 @@ fn undecodable_messages_are_counted_per_family() {
 
 #[test]
 fn tick_line_holds_every_figure() {
-    let line = serde_json::from_str::<Value>(&busy().tick(at(12.5)).to_json()).unwrap();
+    let line = serde_json::from_str::<Value>(&Record::Tick(busy().tick(at(12.5))).to_json()).unwrap();
     assert_eq!(line.get("type").and_then(Value::as_str), Some("tick"));
     assert_eq!(line.get("unix_ms").and_then(Value::as_u64), Some(1_700_000_012_500));
     assert_eq!(line.get("elapsed_s").and_then(Value::as_f64), Some(12.5));
@@ -202,7 +203,7 @@ fn tick_line_holds_every_figure() {
 fn episode_and_eval_lines() {
     let mut s = busy();
     let episode = s.on_episode(at(3.25), &fixtures::episode(1, 4, 812.75, 2700)).unwrap();
-    let line = serde_json::from_str::<Value>(&episode.to_json()).unwrap();
+    let line = serde_json::from_str::<Value>(&Record::Episode(episode).to_json()).unwrap();
     assert_eq!(line.get("type").and_then(Value::as_str), Some("episode"));
     assert_eq!(line.get("elapsed_s").and_then(Value::as_f64), Some(3.25));
     assert_eq!(line.get("executor_id").and_then(Value::as_u64), Some(1));
@@ -214,7 +215,7 @@ fn episode_and_eval_lines() {
     assert_eq!(line.get("weights_version").and_then(Value::as_u64), Some(4990));
 
     let eval = s.on_eval(at(4.0), &fixtures::eval(5, 1234.5)).unwrap();
-    let line = serde_json::from_str::<Value>(&eval.to_json()).unwrap();
+    let line = serde_json::from_str::<Value>(&Record::Eval(eval).to_json()).unwrap();
     assert_eq!(line.get("type").and_then(Value::as_str), Some("eval"));
     assert_eq!(line.get("epoch").and_then(Value::as_u64), Some(5));
     assert_eq!(line.get("learner_step").and_then(Value::as_u64), Some(5000));
