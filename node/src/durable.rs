@@ -9,11 +9,19 @@ use std::path::Path;
 
 pub use tempfile::NamedTempFile;
 
-/// A temporary file in `path`'s directory, to fill and then [`publish`] as `path`.
+/// A temporary file in `path`'s directory, to fill and then [`publish`] as `path`. It is created
+/// with the permissions `File::create` gives (0666 less the umask), not `tempfile`'s private 0600:
+/// the published file is a checkpoint, a record or a picture that others may read.
 pub fn temporary_beside(path: &Path) -> io::Result<NamedTempFile> {
     let dir = parent(path);
     std::fs::create_dir_all(dir)?;
-    NamedTempFile::new_in(dir)
+    let mut builder = tempfile::Builder::new();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    builder.tempfile_in(dir)
 }
 
 /// Writes `bytes` as `path`, atomically and durably.
@@ -65,6 +73,15 @@ mod tests {
         let names: Vec<_> =
             std::fs::read_dir(path.parent().unwrap()).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(names, ["file.bin"]);
+        // Readable by others, as a plain `File::create` would leave it (umask 022 here).
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let created = dir.join("created.bin");
+            std::fs::write(&created, b"x").unwrap();
+            let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+            assert_eq!(mode(&path), mode(&created));
+        }
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
