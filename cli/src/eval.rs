@@ -9,47 +9,27 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 
-use agent::{Actor, AgentConfig, ParamSnapshot, PolicyStack, Schema};
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use learner::{Episode, Evaluation, prepare_latent, run_episode};
-use node::{HierarchyKeys, RunKeys};
-use proto::EvalMode;
+use serde::Serialize;
 use sim::Task;
 use sim::her::HerConfig;
 
-use serde::Serialize;
+use crate::policy::{Latent, Loaded, Policy, PolicyArgs};
 
 /// Options of `sac-lsp eval`.
 #[derive(Debug, Args)]
+#[command(
+    after_help = "Example (the paper's 200 episodes, h = 0, on both cores):\n  sac-lsp eval --checkpoint runs/ID/checkpoints/learner-000000090000.safetensors \\\n      --config deploy/configs/ant-v5.toml --latent zero --threads 2"
+)]
 pub struct EvalArgs {
-    /// The weights: a learner checkpoint (the distributed learner's `learner-<step>.safetensors`,
-    /// `sac-lsp train`'s `epoch-<n>.safetensors`) or a weights snapshot. The networks' sizes are
-    /// read from its tensors. A hierarchy's checkpoint carries its frozen levels; for a file
-    /// without them, the run file's `[hierarchy] levels` are used.
-    #[arg(long)]
-    checkpoint: PathBuf,
-    /// Task to evaluate on: ant-v5, ant-rllab or inverted-pendulum (default: the run file's
-    /// `[train] task`, else ant-v5).
-    #[arg(long)]
-    task: Option<Task>,
-    /// Run file whose `[agent]` table gives what the tensors cannot (squashed actions, the
-    /// embedding's output activation), and whose `[hierarchy]` names frozen levels the checkpoint
-    /// does not carry; without it, the paper's for the level's position (a bottom level squashed
-    /// with a ReLU embedding output, a level above neither).
-    #[arg(long)]
-    config: Option<PathBuf>,
+    /// The policy.
+    #[command(flatten)]
+    pub policy: PolicyArgs,
     /// Episodes to run.
     #[arg(long, default_value_t = 200)]
     episodes: u32,
-    /// How the policy picks its latent: `fixed` is the paper's (one h ~ N(0, I) held for the
-    /// whole evaluation), `zero` uses h = 0 (a Gaussian policy's mean action), `stochastic` draws a
-    /// fresh z every step.
-    #[arg(long, value_enum, default_value_t = Latent::Fixed)]
-    latent: Latent,
-    /// Seed of the resets and the latents.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
     /// Threads the episodes are spread over (the figures do not depend on it).
     #[arg(long, default_value_t = 1)]
     threads: usize,
@@ -59,136 +39,25 @@ pub struct EvalArgs {
     csv: Option<PathBuf>,
 }
 
-/// `--latent`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Latent {
-    /// One h ~ N(0, I) for the whole evaluation (the paper's).
-    Fixed,
-    /// h = 0.
-    Zero,
-    /// A fresh z ~ N(0, I) every step.
-    Stochastic,
-}
-
-impl Latent {
-    fn mode(self) -> EvalMode {
-        match self {
-            Latent::Fixed => EvalMode::FixedLatent,
-            Latent::Zero => EvalMode::ZeroLatent,
-            Latent::Stochastic => EvalMode::Stochastic,
-        }
-    }
-}
-
-/// The policy to evaluate, as read from the checkpoint file.
-struct Policy {
-    config: AgentConfig,
-    snapshot: ParamSnapshot,
-    learner_step: Option<u64>,
-    /// The frozen levels below it, bottom first (none for a single level).
-    frozen: Vec<Vec<u8>>,
-}
-
-impl Policy {
-    /// An actor with these weights on top of the frozen levels.
-    fn actor(&self, seed: u64) -> Result<Actor> {
-        Ok(Actor::with_stack(self.config.clone(), PolicyStack::from_weights(&self.frozen)?, seed)?)
-    }
-}
-
-/// What a run file says about the policy.
-struct RunFile {
-    keys: RunKeys,
-    agent: AgentConfig,
-    hierarchy: HierarchyKeys,
-    her: HerConfig,
-}
-
 /// Runs the evaluation.
 pub fn run(args: &EvalArgs) -> Result<()> {
     if args.episodes == 0 || args.threads == 0 {
         bail!("--episodes and --threads must be at least 1");
     }
-    let run_file = args.config.as_deref().map(read_run_file).transpose()?;
-    let task = match (args.task, &run_file) {
-        (Some(task), _) => task,
-        (None, Some(run)) => run.keys.task.parse().with_context(|| "[train] task of the run file")?,
-        (None, None) => Task::AntV5,
-    };
-    let policy = read_policy(&args.checkpoint, run_file.as_ref())?;
-    // With HER the policy sees observation ++ goal: episodes step the run's goal-conditioned task.
-    let her = run_file.as_ref().map(|r| r.her.clone()).unwrap_or_default();
-    let spec = her.make(task, 0)?.spec().clone();
-    // Real NVP keeps the dimension: every level's action (and latent) is as wide as the env's.
-    let (obs_dim, act_dim) = (policy.config.obs_dim, policy.config.act_dim);
-    if (obs_dim, act_dim) != (spec.obs_dim, spec.act_dim) {
-        bail!(
-            "{}: the networks take {obs_dim} observation and {act_dim} action values, but {task} has {} and {}",
-            args.checkpoint.display(),
-            spec.obs_dim,
-            spec.act_dim
-        );
-    }
+    let Loaded { task, her, policy } = args.policy.load()?;
     let episodes = run_episodes(args, task, &her, &policy)?;
-    let csv = args.csv.clone().unwrap_or_else(|| default_csv(&args.checkpoint, args.latent, args.seed));
+    let (checkpoint, latent, seed) = (&args.policy.checkpoint, args.policy.latent, args.policy.seed);
+    let csv = args.csv.clone().unwrap_or_else(|| default_csv(checkpoint, latent, seed));
     write_csv(&csv, &episodes)?;
     println!("{}", serde_json::to_string(&Summary::new(args, task, &policy, &episodes, &csv))?);
     Ok(())
 }
 
-/// The `[train]` keys, `[hierarchy]` and `[agent]` tables of a run file.
-fn read_run_file(path: &Path) -> Result<RunFile> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let parse = |section: &str| format!("{}: [{section}]", path.display());
-    let keys: RunKeys = node::config::parse_section(&text, "train")
-        .map_err(anyhow::Error::msg)
-        .with_context(|| parse("train"))?;
-    let hierarchy: HierarchyKeys = node::config::parse_section(&text, "hierarchy")
-        .map_err(anyhow::Error::msg)
-        .with_context(|| parse("hierarchy"))?;
-    let base = AgentConfig::default_at_level(hierarchy.depth());
-    let agent: AgentConfig = node::config::parse_section_over(&text, "agent", &base)
-        .map_err(anyhow::Error::msg)
-        .with_context(|| parse("agent"))?;
-    let her: HerConfig = node::config::parse_section(&text, "her")
-        .map_err(anyhow::Error::msg)
-        .with_context(|| parse("her"))?;
-    Ok(RunFile { keys, agent, hierarchy, her })
-}
-
-/// Reads the weights, the networks they fit, and the frozen levels below them.
-fn read_policy(path: &Path, run_file: Option<&RunFile>) -> Result<Policy> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    let snapshot = ParamSnapshot { version: 0, safetensors: bytes };
-    let tensors = snapshot
-        .tensors()
-        .map_err(|e| anyhow::anyhow!("{} is not a safetensors file: {e}", path.display()))?;
-    let in_file = |e: agent::Error| anyhow::anyhow!("{}: {e}", path.display());
-    let embedded = PolicyStack::from_embedded(&tensors).map_err(in_file)?;
-    let frozen: Vec<Vec<u8>> = match run_file {
-        _ if !embedded.is_empty() => embedded.weights().into_iter().map(<[u8]>::to_vec).collect(),
-        Some(run) => run.hierarchy.read().map_err(anyhow::Error::msg)?,
-        None => Vec::new(),
-    };
-    let base = match run_file {
-        Some(run) if run.hierarchy.depth() == frozen.len() => run.agent.clone(),
-        _ => AgentConfig::default_at_level(frozen.len()),
-    };
-    let schema: Schema = tensors.iter().map(|(name, t)| (name.clone(), t.dims().to_vec())).collect();
-    let config = agent::networks_from_schema(&schema, &base)
-        .map_err(|e| anyhow::anyhow!("{} holds no SAC-LSP policy: {e}", path.display()))?;
-    let learner_step = agent::saved_learner_step(&tensors);
-    let policy = Policy { config, snapshot, learner_step, frozen };
-    // Fails here, with the file named, if the levels do not chain.
-    policy.actor(0).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-    Ok(policy)
-}
-
 /// Runs every episode, spread over the threads, and returns them in episode order.
 fn run_episodes(args: &EvalArgs, task: Task, her: &HerConfig, policy: &Policy) -> Result<Vec<Episode>> {
-    let mode = args.latent.mode();
+    let mode = args.policy.latent.mode();
     // The fixed latent, drawn once from the seed and shared by every thread.
-    let mut first = policy.actor(args.seed)?;
+    let mut first = policy.actor(args.policy.seed)?;
     let act_mode = prepare_latent(&mut first, mode);
     let latent = first.fixed_latent().to_vec();
     let (sender, receiver) = mpsc::channel::<Result<(u32, Episode)>>();
@@ -200,12 +69,12 @@ fn run_episodes(args: &EvalArgs, task: Task, her: &HerConfig, policy: &Policy) -
             let latent = &latent;
             scope.spawn(move || {
                 let work = || -> Result<()> {
-                    let mut env = her.make(task, args.seed)?;
-                    let mut actor = policy.actor(args.seed)?;
+                    let mut env = her.make(task, args.policy.seed)?;
+                    let mut actor = policy.actor(args.policy.seed)?;
                     actor.load(&policy.snapshot)?;
                     actor.set_fixed_latent(latent)?;
                     for i in (thread as u32..n).step_by(threads) {
-                        let seed = args.seed.wrapping_add(u64::from(i));
+                        let seed = args.policy.seed.wrapping_add(u64::from(i));
                         // Another stream than the fixed latent's (drawn from the seed itself).
                         actor.reseed(seed ^ 0x5eed_0000_0000_0000);
                         let episode = run_episode(&mut actor, env.as_mut(), act_mode, Some(seed))?;
@@ -295,13 +164,13 @@ impl Summary {
         let mid = sorted.len() / 2;
         let median = if sorted.len() % 2 == 1 { sorted[mid] } else { (sorted[mid - 1] + sorted[mid]) / 2.0 };
         Self {
-            checkpoint: args.checkpoint.display().to_string(),
+            checkpoint: args.policy.checkpoint.display().to_string(),
             learner_step: policy.learner_step,
             frozen_levels: policy.frozen.len(),
             task: task.name(),
-            mode: args.latent.mode().name(),
+            mode: args.policy.latent.mode().name(),
             episodes: args.episodes,
-            seed: args.seed,
+            seed: args.policy.seed,
             mean,
             std,
             stderr: std / (sorted.len() as f64).sqrt(),
@@ -317,43 +186,19 @@ impl Summary {
 
 #[cfg(test)]
 mod tests {
-    use agent::Learner;
+    use agent::{AgentConfig, Learner, PolicyStack};
 
     use super::*;
+    use crate::policy::tests::{checkpoint, policy_args};
+    use crate::policy::{read_policy, read_run_file};
 
     /// `run_episodes` on the pendulum without goals.
     fn pendulum_episodes(args: &EvalArgs, policy: &Policy) -> Vec<Episode> {
         run_episodes(args, Task::InvertedPendulum, &HerConfig::default(), policy).unwrap()
     }
 
-    /// A tiny inverted-pendulum learner's checkpoint, written to a fresh folder.
-    fn checkpoint(name: &str, twin_q: bool) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("sac-lsp-eval-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let cfg = AgentConfig {
-            critic_hidden: vec![8],
-            embedding_layers: vec![8, 2],
-            coupling_hidden: vec![4],
-            twin_q,
-            ..AgentConfig::for_task(4, 1)
-        };
-        let learner = Learner::new(cfg, 7).unwrap();
-        let path = dir.join("learner-000000000000.safetensors");
-        std::fs::write(&path, learner.checkpoint().unwrap().safetensors).unwrap();
-        path
-    }
-
     fn args(checkpoint: &Path, latent: Latent, threads: usize) -> EvalArgs {
-        EvalArgs {
-            checkpoint: checkpoint.to_path_buf(),
-            task: Some(Task::InvertedPendulum),
-            config: None,
-            episodes: 6,
-            latent,
-            seed: 11,
-            threads,
-            csv: None,
-        }
+        EvalArgs { policy: policy_args(checkpoint, latent), episodes: 6, threads, csv: None }
     }
 
     #[test]
@@ -379,7 +224,8 @@ mod tests {
     #[test]
     fn bad_input_is_one_line_naming_what_is_wrong() {
         let path = checkpoint("bad", false);
-        let on_ant = EvalArgs { task: Some(Task::AntV5), ..args(&path, Latent::Zero, 1) };
+        let mut on_ant = args(&path, Latent::Zero, 1);
+        on_ant.policy.task = Some(Task::AntV5);
         let err = run(&on_ant).unwrap_err().to_string();
         assert!(err.contains("take 4 observation and 1 action values, but ant-v5 has 105 and 8"), "{err}");
         let junk = path.with_file_name("junk.safetensors");

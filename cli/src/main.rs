@@ -1,6 +1,7 @@
 //! `sac-lsp`: the command-line front of the project: `rollout` (checking the environments against
 //! other implementations), `train` (single-machine training), `monitor` (a live view and JSONL record
-//! of a distributed run's topics) and `plot` (PNG learning curves from that record).
+//! of a distributed run's topics), `plot` (PNG learning curves from that record), `eval` (a
+//! checkpoint's returns) and `render` (a video of a checkpoint's policy).
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -8,7 +9,10 @@ use clap::{Parser, Subcommand};
 mod csv;
 mod eval;
 mod monitor;
+mod picture;
 mod plot;
+mod policy;
+mod render;
 mod rollout;
 mod tensorboard;
 mod train;
@@ -33,6 +37,8 @@ enum Command {
     Plot(plot::PlotArgs),
     /// Evaluate a checkpoint's policy: N episodes, per-episode CSV, JSON summary.
     Eval(eval::EvalArgs),
+    /// Draw a checkpoint's policy acting: a GIF (or MP4) video and a PNG still, headless.
+    Render(render::RenderArgs),
 }
 
 fn main() -> Result<()> {
@@ -48,5 +54,6 @@ fn main() -> Result<()> {
         Command::Monitor(args) => monitor::run(&args),
         Command::Plot(args) => plot::run(&args),
         Command::Eval(args) => eval::run(&args),
+        Command::Render(args) => render::run(&args),
     }
 }

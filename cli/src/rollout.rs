@@ -12,6 +12,9 @@ use crate::csv;
 
 /// Options of `sac-lsp rollout`.
 #[derive(Debug, Args)]
+#[command(
+    after_help = "Example (the check against Gymnasium in tests/reference/):\n  sac-lsp rollout --task ant-v5 --actions actions.csv --seed 0 --out trajectory.csv"
+)]
 pub struct RolloutArgs {
     /// Task to step: ant-v5, ant-rllab or inverted-pendulum.
     #[arg(long)]

@@ -70,12 +70,26 @@ pub fn run_episode(
     mode: Mode,
     seed: Option<u64>,
 ) -> anyhow::Result<Episode> {
+    run_episode_watched(actor, env, mode, seed, &mut |_| {})
+}
+
+/// [`run_episode`], calling `watch` with the environment after the reset and after every step
+/// (`sac-lsp render` draws a frame there).
+pub fn run_episode_watched(
+    actor: &mut Actor,
+    env: &mut dyn Environment,
+    mode: Mode,
+    seed: Option<u64>,
+    watch: &mut dyn FnMut(&dyn Environment),
+) -> anyhow::Result<Episode> {
     let mut observation = to_f32(&env.reset(seed));
+    watch(&*env);
     let (mut episode_return, mut length, mut goal_reached) = (0.0, 0, None);
     loop {
         let act = actor.act(&observation, mode)?;
         let action = env.spec().action_from_unit(&act.env_action);
         let step = env.step(&action)?;
+        watch(&*env);
         // The task's own reward, with or without a goal (the dissertation reports it for HER too).
         episode_return += step.reward;
         length += 1;

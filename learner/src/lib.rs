@@ -47,7 +47,7 @@ use agent::{Actor, AnyLearner, ParamSnapshot, PolicyStack};
 pub use batch::Sampled;
 pub use checkpoint::CheckpointDir;
 pub use config::{LearnerConfig, LearnerSettings};
-pub use evaluate::{Episode, Evaluation, evaluate, prepare_latent, run_episode};
+pub use evaluate::{Episode, Evaluation, evaluate, prepare_latent, run_episode, run_episode_watched};
 pub use fetch::{FetchStatus, Fetcher, Requests, Waiting};
 use node::{Bus, Shutdown};
 use proto::{EvalMode, EvalReport};

@@ -5,7 +5,11 @@ use node::NodeArgs;
 
 /// Learner: trains SAC-LSP on batches from the replay server and publishes weights.
 #[derive(Debug, Parser)]
-#[command(name = "learner", version)]
+#[command(
+    name = "learner",
+    version,
+    after_help = "Example:\n  learner --config deploy/configs/ant-v5.toml --run-id ID --connect tcp/127.0.0.1:7447"
+)]
 struct Args {
     #[command(flatten)]
     node: NodeArgs,

@@ -5,7 +5,11 @@ use node::NodeArgs;
 
 /// Parameter server: the latest weights keyed by the global step, and the executors' barrier.
 #[derive(Debug, Parser)]
-#[command(name = "param-server", version)]
+#[command(
+    name = "param-server",
+    version,
+    after_help = "Example:\n  param-server --config deploy/configs/ant-v5.toml --run-id ID --listen tcp/0.0.0.0:7447"
+)]
 struct Args {
     #[command(flatten)]
     node: NodeArgs,

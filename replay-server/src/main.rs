@@ -5,7 +5,11 @@ use node::NodeArgs;
 
 /// Replay server: owns the prioritized replay buffer and serves it over zenoh.
 #[derive(Debug, Parser)]
-#[command(name = "replay-server", version)]
+#[command(
+    name = "replay-server",
+    version,
+    after_help = "Example:\n  replay-server --config deploy/configs/ant-v5.toml --run-id ID --connect tcp/127.0.0.1:7447"
+)]
 struct Args {
     #[command(flatten)]
     node: NodeArgs,

@@ -86,6 +86,10 @@ impl Environment for AntRllab {
         &self.episode.spec
     }
 
+    fn physics(&self) -> Option<&Physics> {
+        Some(&self.episode.physics)
+    }
+
     fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
         self.episode.noisy_restart(seed, |noise, physics| InitState {
             qpos: noise.normal_around(&INIT_QPOS, QPOS_NOISE),

@@ -39,6 +39,9 @@ pub enum EnvError {
     /// The task name is not one of the known tasks.
     #[error("unknown task {0:?}; known tasks: ant-v5, ant-rllab, inverted-pendulum")]
     UnknownTask(String),
+    /// A picture that cannot be drawn.
+    #[error("cannot render: {0}")]
+    Render(String),
     /// MuJoCo refused the model (a bug in the bundled MJCF, never user input).
     #[error("MuJoCo could not load the {task} model: {message}")]
     Model {

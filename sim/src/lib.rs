@@ -7,7 +7,7 @@
 //! | `ant-v5-xy` | [`ant_v5`] | Ant-v5 with `exclude_current_positions_from_observation=False` (107-d) |
 //! | `inverted-pendulum` | [`pendulum`] | Gymnasium InvertedPendulum-v5, for quick learning checks |
 //!
-//! [`her`] makes any of them goal-conditioned (hindsight experience replay).
+//! [`her`] makes any of them goal-conditioned (hindsight experience replay); [`render`] draws them.
 //!
 //! Both Ant tasks load one MJCF file, `assets/ant.xml` ([`ant_model`]); [`physics`] owns the MuJoCo
 //! model/data pair and the process-wide MuJoCo set-up. Start reading at [`Environment`] and [`Task`].
@@ -27,6 +27,7 @@ pub mod her;
 mod numpy;
 pub mod pendulum;
 pub mod physics;
+pub mod render;
 mod spec;
 mod task;
 
@@ -49,6 +50,11 @@ pub trait Environment: Send {
 
     /// Applies one action and advances the simulation by one control step.
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError>;
+
+    /// The simulation it steps, for drawing it ([`render`]); `None` for a task without one.
+    fn physics(&self) -> Option<&physics::Physics> {
+        None
+    }
 }
 
 /// Checks an action's length and finiteness; every task calls this before touching the simulator.

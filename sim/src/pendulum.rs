@@ -53,6 +53,10 @@ impl Environment for InvertedPendulum {
         &self.episode.spec
     }
 
+    fn physics(&self) -> Option<&Physics> {
+        Some(&self.episode.physics)
+    }
+
     fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
         self.episode.noisy_restart(seed, |noise, physics| InitState {
             qpos: noise.uniform_around(&physics.qpos0(), RESET_NOISE_SCALE),

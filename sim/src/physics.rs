@@ -10,6 +10,7 @@ use crate::{EnvError, InitState};
 
 /// A loaded model with its simulation state, owned by one environment (one thread).
 pub struct Physics {
+    model: Arc<MjModel>,
     data: MjData<Arc<MjModel>>,
 }
 
@@ -38,7 +39,13 @@ impl Physics {
         configure_mujoco_logging();
         let model =
             MjModel::from_xml_string(mjcf).map_err(|e| EnvError::Model { task, message: e.to_string() })?;
-        Ok(Self { data: MjData::new(Arc::new(model)) })
+        let model = Arc::new(model);
+        Ok(Self { data: MjData::new(Arc::clone(&model)), model })
+    }
+
+    /// The compiled model, shared (a renderer keeps its own data of it).
+    pub fn shared_model(&self) -> Arc<MjModel> {
+        Arc::clone(&self.model)
     }
 
     /// The compiled model.

@@ -37,6 +37,9 @@ use tick::Now;
 
 /// `sac-lsp monitor` options.
 #[derive(Debug, Args)]
+#[command(
+    after_help = "Example (a run started by deploy/local.sh on this machine):\n  sac-lsp monitor --run-id ID --connect tcp/127.0.0.1:7447"
+)]
 pub struct MonitorArgs {
     /// The bus options shared with the roles (--id and --config are ignored).
     #[command(flatten)]

@@ -1,20 +1,39 @@
-//! One line chart: title, axes box with ticks, grid and numeric labels, a legend, and the series as
-//! lines (optionally with markers), drawn onto a [`Canvas`].
+//! One line chart — title, axes with ticks, grid and labels, a legend, the series as lines (with
+//! markers for sparse ones) — drawn with `plotters` and encoded as a compressed PNG.
 
-use super::axis::Axis;
-use super::font::{self, text_height, text_width};
-use super::raster::{Canvas, Pixel, Rect, Rgb};
+use std::sync::Once;
 
-/// Text scale: each font pixel is this many canvas pixels.
-const TEXT_SCALE: i64 = 2;
-/// Tick mark length in pixels.
-const TICK_LEN: i64 = 6;
-/// Gap between things, in pixels.
-const GAP: i64 = 8;
-/// Line width of the series.
-const LINE_WIDTH: i64 = 2;
-/// Side of a marker square.
-const MARKER_SIZE: i64 = 7;
+use anyhow::{Result, anyhow};
+use plotters::prelude::*;
+use plotters::style::{FontStyle, register_font};
+
+/// The font every chart's text is set in: DejaVu Sans, bundled so charts look the same on every
+/// machine (its licence is `cli/assets/DejaVuSans-LICENSE.txt`).
+const FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+/// The family name the charts ask plotters for.
+const FAMILY: &str = "sans-serif";
+
+/// An RGB colour.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Rgb {
+    /// Red.
+    pub r: u8,
+    /// Green.
+    pub g: u8,
+    /// Blue.
+    pub b: u8,
+}
+
+impl Rgb {
+    /// First series (matplotlib's C0).
+    pub const BLUE: Rgb = Rgb { r: 31, g: 119, b: 180 };
+    /// Second series (matplotlib's C1).
+    pub const ORANGE: Rgb = Rgb { r: 255, g: 127, b: 14 };
+
+    fn plotters(self) -> RGBColor {
+        RGBColor(self.r, self.g, self.b)
+    }
+}
 
 /// One data point.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -45,168 +64,131 @@ pub struct Chart {
     pub title: String,
     /// Under the x axis.
     pub x_label: String,
-    /// Above the y axis.
+    /// Beside the y axis.
     pub y_label: String,
     /// The lines.
     pub series: Vec<Series>,
 }
 
-/// Where the data goes on the canvas, and how values map to pixels.
-#[derive(Debug, Clone)]
-pub struct Frame {
-    /// The plot area (inside the axes box).
-    pub area: Rect,
-    /// Horizontal axis.
-    pub x: Axis,
-    /// Vertical axis.
-    pub y: Axis,
+/// The value range one axis shows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Range {
+    /// Low end.
+    pub lo: f64,
+    /// High end.
+    pub hi: f64,
 }
 
-impl Frame {
-    /// The pixel of a data point.
-    pub fn pixel(&self, p: Point) -> Pixel {
-        let a = self.area;
-        let x = a.left as f64 + self.x.fraction(p.x) * (a.right - a.left) as f64;
-        let y = a.bottom as f64 - self.y.fraction(p.y) * (a.bottom - a.top) as f64;
-        // Saturating casts: far outliers land far outside and are clipped.
-        Pixel { x: x.round() as i64, y: y.round() as i64 }
+impl Range {
+    /// `lo..hi` of the values with a margin, never empty (a single value gets ±1, or ±5 %).
+    fn covering(values: impl Iterator<Item = f64>, margin: f64) -> Range {
+        let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        if lo > hi {
+            return Range { lo: 0.0, hi: 1.0 };
+        }
+        let span = if hi > lo { hi - lo } else { (lo.abs() * 0.1).max(2.0) };
+        let pad = if hi > lo { span * margin } else { span / 2.0 };
+        Range { lo: lo - pad, hi: hi + pad }
     }
 }
 
 impl Chart {
-    fn points(&self) -> impl Iterator<Item = Point> + '_ {
+    fn finite(&self) -> impl Iterator<Item = Point> + '_ {
         self.series
             .iter()
             .flat_map(|s| s.points.iter().copied())
             .filter(|p| p.x.is_finite() && p.y.is_finite())
     }
 
-    /// The axes for the data and the plot area for a `width` x `height` canvas.
-    pub fn frame(&self, width: u32, height: u32) -> Frame {
-        let range = |value: fn(&Point) -> f64| {
-            self.points()
-                .map(|p| value(&p))
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)))
-        };
-        let (x_min, x_max) = range(|p| p.x);
-        let (y_min, y_max) = range(|p| p.y);
-        let x = Axis::covering(x_min, x_max);
-        let y = Axis::covering(y_min, y_max);
-        let widest_y_label =
-            y.ticks().iter().map(|t| text_width(&y.label(*t), TEXT_SCALE)).max().unwrap_or(0);
-        let line = text_height(TEXT_SCALE);
-        let area = Rect {
-            left: GAP * 2 + widest_y_label + TICK_LEN,
-            top: GAP * 4 + line * 2,
-            right: i64::from(width) - GAP * 3,
-            bottom: i64::from(height) - GAP * 4 - line * 2,
-        };
-        Frame { area, x, y }
+    /// The axes' ranges: the data, with a margin above and below.
+    pub fn ranges(&self) -> (Range, Range) {
+        (Range::covering(self.finite().map(|p| p.x), 0.0), Range::covering(self.finite().map(|p| p.y), 0.05))
     }
 
-    /// Draws the chart on a white `width` x `height` canvas.
-    pub fn render(&self, width: u32, height: u32) -> Canvas {
-        let mut canvas = Canvas::new(width, height);
-        let frame = self.frame(width, height);
-        let area = frame.area;
-        let line = text_height(TEXT_SCALE);
-        let centred = |text: &str, x: i64| x - text_width(text, TEXT_SCALE) / 2;
+    /// The chart as a `width` x `height` PNG.
+    pub fn png(&self, width: u32, height: u32) -> Result<Vec<u8>> {
+        crate::picture::png(width, height, &self.draw(width, height)?)
+    }
 
-        font::draw(
-            &mut canvas,
-            &self.title,
-            Pixel { x: centred(&self.title, i64::from(width) / 2), y: GAP },
-            TEXT_SCALE,
-            Rgb::BLACK,
-        );
-        font::draw(
-            &mut canvas,
-            &self.y_label,
-            Pixel { x: area.left, y: GAP * 2 + line },
-            TEXT_SCALE,
-            Rgb::BLACK,
-        );
-        let x_label_at = Pixel {
-            x: centred(&self.x_label, (area.left + area.right) / 2),
-            y: area.bottom + GAP * 3 + line,
-        };
-        font::draw(&mut canvas, &self.x_label, x_label_at, TEXT_SCALE, Rgb::BLACK);
+    /// The chart's RGB pixels, row by row from the top.
+    pub fn draw(&self, width: u32, height: u32) -> Result<Vec<u8>> {
+        static REGISTER: Once = Once::new();
+        REGISTER.call_once(|| {
+            // The bundled file is a valid font; a failure here would show as missing text.
+            let _ = register_font(FAMILY, FontStyle::Normal, FONT);
+        });
+        let mut rgb = vec![255u8; (width * height * 3) as usize];
+        self.draw_on(&mut rgb, width, height).map_err(|e| anyhow!("drawing {:?}: {e}", self.title))?;
+        Ok(rgb)
+    }
 
-        for tick in frame.x.ticks() {
-            let px = frame.pixel(Point { x: tick, y: frame.y.lo }).x;
-            canvas.fill(
-                Rect { left: px, top: area.top + 1, right: px, bottom: area.bottom - 1 },
-                Rgb::LIGHT_GREY,
-            );
-            canvas.fill(
-                Rect { left: px, top: area.bottom, right: px, bottom: area.bottom + TICK_LEN },
-                Rgb::BLACK,
-            );
-            let label = frame.x.label(tick);
-            let at = Pixel { x: centred(&label, px), y: area.bottom + TICK_LEN + GAP / 2 };
-            font::draw(&mut canvas, &label, at, TEXT_SCALE, Rgb::BLACK);
-        }
-        for tick in frame.y.ticks() {
-            let py = frame.pixel(Point { x: frame.x.lo, y: tick }).y;
-            canvas.fill(
-                Rect { left: area.left + 1, top: py, right: area.right - 1, bottom: py },
-                Rgb::LIGHT_GREY,
-            );
-            canvas
-                .fill(Rect { left: area.left - TICK_LEN, top: py, right: area.left, bottom: py }, Rgb::BLACK);
-            let label = frame.y.label(tick);
-            let at = Pixel {
-                x: area.left - TICK_LEN - GAP / 2 - text_width(&label, TEXT_SCALE),
-                y: py - line / 2,
-            };
-            font::draw(&mut canvas, &label, at, TEXT_SCALE, Rgb::BLACK);
-        }
-        canvas.outline(area, Rgb::BLACK);
-
-        let inside =
-            Rect { left: area.left + 1, top: area.top + 1, right: area.right - 1, bottom: area.bottom - 1 };
+    fn draw_on(&self, rgb: &mut [u8], width: u32, height: u32) -> Result<(), Box<dyn std::error::Error>> {
+        let root = BitMapBackend::with_buffer(rgb, (width, height)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (x, y) = self.ranges();
+        let mut chart = ChartBuilder::on(&root)
+            .caption(&self.title, (FAMILY, 22))
+            .margin(14)
+            .x_label_area_size(52)
+            .y_label_area_size(76)
+            .build_cartesian_2d(x.lo..x.hi, y.lo..y.hi)?;
+        chart
+            .configure_mesh()
+            .x_desc(&self.x_label)
+            .y_desc(&self.y_label)
+            .x_label_formatter(&|v| tick_label(*v))
+            .y_label_formatter(&|v| tick_label(*v))
+            .label_style((FAMILY, 14))
+            .axis_desc_style((FAMILY, 16))
+            .bold_line_style(RGBColor(225, 225, 225))
+            .light_line_style(RGBColor(242, 242, 242))
+            .draw()?;
         for series in &self.series {
-            let pixels: Vec<Pixel> = series
+            let colour = series.colour.plotters();
+            let points: Vec<(f64, f64)> = series
                 .points
                 .iter()
                 .filter(|p| p.x.is_finite() && p.y.is_finite())
-                .map(|p| frame.pixel(*p))
+                .map(|p| (p.x, p.y))
                 .collect();
-            for pair in pixels.windows(2) {
-                canvas.line(pair[0], pair[1], series.colour, LINE_WIDTH, inside);
-            }
-            if series.markers || pixels.len() == 1 {
-                for p in &pixels {
-                    canvas.marker(*p, series.colour, MARKER_SIZE, inside);
-                }
+            let markers = series.markers;
+            chart
+                .draw_series(LineSeries::new(points.iter().copied(), colour.stroke_width(2)))?
+                .label(series.name.as_str())
+                .legend(move |(x, y)| {
+                    EmptyElement::at((x, y))
+                        + PathElement::new(vec![(0, 0), (20, 0)], colour.stroke_width(2))
+                        + Circle::new((10, 0), if markers { 4 } else { 0 }, colour.filled())
+                });
+            if markers || points.len() == 1 {
+                chart.draw_series(points.iter().map(|p| Circle::new(*p, 4, colour.filled())))?;
             }
         }
-        self.legend(&mut canvas, area);
-        if self.points().next().is_none() {
-            let text = "no data";
-            let at =
-                Pixel { x: centred(text, (area.left + area.right) / 2), y: (area.top + area.bottom) / 2 };
-            font::draw(&mut canvas, text, at, TEXT_SCALE, Rgb::BLACK);
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .label_font((FAMILY, 14))
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(180, 180, 180))
+            .draw()?;
+        if self.finite().next().is_none() {
+            let centre = ((width / 2) as i32 - 30, (height / 2) as i32);
+            root.draw_text("no data", &(FAMILY, 18).into_text_style(&root), centre)?;
         }
-        canvas
+        root.present()?;
+        Ok(())
     }
+}
 
-    /// A sample line and the name of each series, top left inside the plot (learning curves start
-    /// low, so that corner is usually empty).
-    fn legend(&self, canvas: &mut Canvas, area: Rect) {
-        let line = text_height(TEXT_SCALE);
-        let clip = canvas.bounds();
-        for (i, series) in self.series.iter().enumerate() {
-            let top = area.top + GAP + i as i64 * (line + GAP);
-            let mid = top + line / 2;
-            let start = Pixel { x: area.left + GAP, y: mid };
-            let end = Pixel { x: area.left + GAP + 24, y: mid };
-            canvas.line(start, end, series.colour, LINE_WIDTH, clip);
-            if series.markers {
-                canvas.marker(Pixel { x: area.left + GAP + 12, y: mid }, series.colour, MARKER_SIZE, clip);
-            }
-            font::draw(canvas, &series.name, Pixel { x: end.x + GAP, y: top }, TEXT_SCALE, Rgb::BLACK);
-        }
+/// A tick label: at most three significant decimals, thousands as `k` and millions as `M`.
+pub fn tick_label(v: f64) -> String {
+    let trim = |s: String| {
+        if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.').to_string() } else { s }
+    };
+    match v.abs() {
+        a if a >= 1e6 => format!("{}M", trim(format!("{:.2}", v / 1e6))),
+        a if a >= 1e4 => format!("{}k", trim(format!("{:.1}", v / 1e3))),
+        _ => trim(format!("{v:.3}")),
     }
 }
 
@@ -216,47 +198,79 @@ mod tests {
 
     fn chart(points: Vec<Point>) -> Chart {
         Chart {
-            title: "t".into(),
-            x_label: "x".into(),
-            y_label: "y".into(),
-            series: vec![Series { name: "s".into(), colour: Rgb::BLUE, points, markers: true }],
+            title: "return vs env steps".into(),
+            x_label: "env steps".into(),
+            y_label: "return".into(),
+            series: vec![Series { name: "eval".into(), colour: Rgb::ORANGE, points, markers: true }],
         }
     }
 
+    /// Pixels of `colour` in the image's left and right halves.
+    fn halves(rgb: &[u8], width: u32, colour: Rgb) -> (usize, usize) {
+        let mut counts = (0, 0);
+        for (i, p) in rgb.chunks(3).enumerate() {
+            if p == [colour.r, colour.g, colour.b] {
+                if (i as u32 % width) < width / 2 { counts.0 += 1 } else { counts.1 += 1 }
+            }
+        }
+        counts
+    }
+
     #[test]
-    fn the_series_is_drawn_where_the_frame_maps_it() {
-        // Interior points (a data maximum on a whole step would sit on the axes box).
-        let c =
-            chart(vec![Point { x: 10.0, y: 5.0 }, Point { x: 100.0, y: 37.0 }, Point { x: 190.0, y: 20.0 }]);
-        let frame = c.frame(640, 400);
-        assert_eq!((frame.x.lo, frame.x.hi, frame.y.lo, frame.y.hi), (0.0, 200.0, 0.0, 40.0));
-        let canvas = c.render(640, 400);
-        // Rounding may put the line one pixel off the ideal one.
-        let near = |p: Point| {
-            let at = frame.pixel(p);
-            (-1..=1)
-                .any(|dy| (-1..=1).any(|dx| canvas.get(Pixel { x: at.x + dx, y: at.y + dy }) == Rgb::BLUE))
+    fn a_rising_line_is_drawn_with_its_text_and_decodes() {
+        let c = chart(vec![
+            Point { x: 0.0, y: 0.0 },
+            Point { x: 500_000.0, y: 300.0 },
+            Point { x: 1e6, y: 900.0 },
+        ]);
+        let (width, height) = (480, 320);
+        let rgb = c.draw(width, height).unwrap();
+        let (left, right) = halves(&rgb, width, Rgb::ORANGE);
+        assert!(left > 100 && right > 100, "the line spans the plot: {left} / {right}");
+        // Rising: in the right half, the orange pixels sit higher (smaller rows) on average.
+        let mean_row = |lo: u32, hi: u32| {
+            let rows: Vec<u32> = rgb
+                .chunks(3)
+                .enumerate()
+                .filter(|(i, p)| {
+                    let col = *i as u32 % width;
+                    (lo..hi).contains(&col) && *p == [255, 127, 14]
+                })
+                .map(|(i, _)| i as u32 / width)
+                .collect();
+            rows.iter().sum::<u32>() as f64 / rows.len().max(1) as f64
         };
-        for p in [Point { x: 55.0, y: 21.0 }, Point { x: 145.0, y: 28.5 }] {
-            assert!(near(p), "{p:?}");
-        }
-        // Markers sit exactly on the points.
-        for p in &c.series[0].points {
-            assert_eq!(canvas.get(frame.pixel(*p)), Rgb::BLUE, "{p:?}");
-        }
-        // Off the line: background or grid, not the series.
-        let off = canvas.get(frame.pixel(Point { x: 50.0, y: 35.0 }));
-        assert!(off == Rgb::WHITE || off == Rgb::LIGHT_GREY, "{off:?}");
-        // The axes box.
-        assert_eq!(canvas.get(Pixel { x: frame.area.left, y: frame.area.bottom }), Rgb::BLACK);
-        assert_eq!(canvas.get(Pixel { x: frame.area.right, y: frame.area.top }), Rgb::BLACK);
+        assert!(mean_row(width / 2, width) < mean_row(0, width / 2));
+        // Text: dark anti-aliased glyph pixels in the title band and under the plot.
+        let dark = |rows: std::ops::Range<u32>| {
+            rows.flat_map(|r| (0..width).map(move |c| (r * width + c) as usize * 3))
+                .filter(|i| rgb[*i] < 100 && rgb[i + 1] < 100 && rgb[i + 2] < 100)
+                .count()
+        };
+        assert!(dark(0..36) > 50, "the title");
+        assert!(dark(height - 52..height) > 50, "tick labels and the axis name");
+        assert_eq!(&rgb[..3], &[255, 255, 255], "white corner");
+        let png = c.png(width, height).unwrap();
+        let info = png::Decoder::new(std::io::Cursor::new(&png)).read_info().unwrap().info().clone();
+        assert_eq!((info.width, info.height), (width, height));
+        assert!(png.len() < rgb.len() / 4, "compressed: {} bytes", png.len());
     }
 
     #[test]
-    fn non_finite_points_are_skipped_and_no_data_still_renders() {
+    fn non_finite_points_are_skipped_and_no_data_still_draws() {
         let c = chart(vec![Point { x: f64::NAN, y: 1.0 }, Point { x: 1.0, y: 2.0 }]);
-        assert_eq!(c.frame(300, 200).x, Axis::covering(1.0, 1.0));
-        let empty = chart(Vec::new()).render(300, 200);
-        assert_eq!(empty.into_image().pixels.len(), 300 * 200 * 3);
+        let (x, y) = c.ranges();
+        assert!(x.lo < 1.0 && 1.0 < x.hi && y.lo < 2.0 && 2.0 < y.hi, "{x:?} {y:?}");
+        assert_eq!(chart(Vec::new()).draw(300, 200).unwrap().len(), 300 * 200 * 3);
+    }
+
+    #[test]
+    fn tick_labels_stay_short() {
+        assert_eq!(tick_label(0.0), "0");
+        assert_eq!(tick_label(0.125), "0.125");
+        assert_eq!(tick_label(2500.0), "2500");
+        assert_eq!(tick_label(250_000.0), "250k");
+        assert_eq!(tick_label(1_500_000.0), "1.5M");
+        assert_eq!(tick_label(-40_000.0), "-40k");
     }
 }

@@ -21,6 +21,9 @@ pub use trainer::Trainer;
 
 /// Options of `sac-lsp train` (flags override the run file's `[train]` table).
 #[derive(Debug, Args)]
+#[command(
+    after_help = "Examples:\n  sac-lsp train --config deploy/configs/inverted-pendulum.toml\n  sac-lsp train --config deploy/configs/ant-v5.toml --minutes 30 --out runs/ant-30min"
+)]
 pub struct TrainArgs {
     /// Run file with `[train]`, `[agent]` and `[replay]` tables (see deploy/configs/).
     #[arg(long)]

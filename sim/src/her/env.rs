@@ -87,6 +87,10 @@ impl Environment for GoalEnv {
         &self.spec
     }
 
+    fn physics(&self) -> Option<&crate::physics::Physics> {
+        self.inner.physics()
+    }
+
     fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
         if let Some(seed) = seed {
             self.rng = StdRng::seed_from_u64(seed ^ GOAL_STREAM);
