@@ -31,9 +31,11 @@ fi
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 echo "setup: downloading the mujoco==$MUJOCO_VERSION wheel from PyPI" >&2
-if ! "$python" -m pip download --quiet --no-deps --only-binary=:all: --dest "$work" \
-    "mujoco==$MUJOCO_VERSION" >"$work/pip.log" 2>&1; then
-    cat "$work/pip.log" >&2
+# On a terminal pip draws its own progress bar; elsewhere (CI, logs) its output is kept for errors.
+if [[ -t 2 ]]; then pip_log=/dev/stderr quiet=(); else pip_log="$work/pip.log" quiet=(--quiet); fi
+if ! "$python" -m pip download "${quiet[@]}" --no-deps --only-binary=:all: --dest "$work" \
+    "mujoco==$MUJOCO_VERSION" >"$pip_log" 2>&1; then
+    [[ $pip_log == /dev/stderr ]] || cat "$pip_log" >&2
     echo "setup: could not download mujoco==$MUJOCO_VERSION from PyPI (is the package registry reachable?)." >&2
     exit 1
 fi

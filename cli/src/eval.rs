@@ -17,6 +17,7 @@ use sim::Task;
 use sim::her::HerConfig;
 
 use crate::policy::{Latent, Loaded, Policy, PolicyArgs};
+use crate::progress::Progress;
 
 /// Options of `sac-lsp eval`.
 #[derive(Debug, Args)]
@@ -94,20 +95,19 @@ fn run_episodes(args: &EvalArgs, task: Task, her: &HerConfig, policy: &Policy) -
     })
 }
 
-/// Gathers the episodes as they finish, with a progress line on stderr every tenth of the run.
+/// Gathers the episodes as they finish, showing progress on stderr.
 fn collect(receiver: mpsc::Receiver<Result<(u32, Episode)>>, n: u32) -> Result<Vec<Episode>> {
     let mut episodes: Vec<Option<Episode>> = vec![None; n as usize];
     let (mut done, mut sum) = (0u32, 0.0);
-    let every = (n / 10).max(1);
+    let mut progress = Progress::new("episodes", u64::from(n));
     for message in receiver {
         let (i, episode) = message?;
         episodes[i as usize] = Some(episode);
         done += 1;
         sum += episode.episode_return;
-        if done.is_multiple_of(every) || done == n {
-            eprintln!("eval: {done}/{n} episodes, mean return so far {:.1}", sum / f64::from(done));
-        }
+        progress.inc(&format!("mean return so far {:.1}", sum / f64::from(done)));
     }
+    progress.finish();
     episodes
         .into_iter()
         .enumerate()

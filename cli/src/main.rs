@@ -12,6 +12,7 @@ mod monitor;
 mod picture;
 mod plot;
 mod policy;
+mod progress;
 mod render;
 mod rollout;
 mod tensorboard;

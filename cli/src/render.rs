@@ -12,6 +12,7 @@ use learner::{prepare_latent, run_episode_watched};
 use sim::render::{Image, Renderer, View};
 
 use crate::policy::{Loaded, PolicyArgs};
+use crate::progress::Progress;
 
 /// Options of `sac-lsp render`.
 #[derive(Debug, Args)]
@@ -93,6 +94,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let frame_s = env.spec().dt * f64::from(args.every);
 
     let mut frames: Vec<Image> = Vec::new();
+    // At most this many frames: an episode that ends sooner leaves the bar short.
+    let per_episode = args.steps.div_ceil(args.every);
+    let mut progress = Progress::new("frames", u64::from(args.episodes * per_episode));
     for i in 0..args.episodes {
         let mut step = 0u32;
         let before = frames.len();
@@ -106,6 +110,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                     // The environment is the one made above: it has physics.
                     if let Some(physics) = env.physics() {
                         frames.push(renderer.frame(physics));
+                        progress.inc(&format!("episode {}", i + 1));
                     }
                 }
                 step += 1;
@@ -120,6 +125,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             frames.len() - before
         );
     }
+    progress.finish();
     let video = match format {
         Format::Gif => gif(&frames, frame_s)?,
         Format::Mp4 => mp4(&frames, frame_s)?,

@@ -15,6 +15,7 @@ use clap::Args;
 pub use config::TrainConfig;
 use record::MetricsFile;
 
+use crate::progress::Progress;
 use crate::tensorboard::EventWriter;
 pub use run_config::RunConfig;
 pub use trainer::Trainer;
@@ -71,8 +72,10 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     let started = Instant::now();
     let (epochs, checkpoint_every) = (config.train.epochs, config.train.checkpoint_every_epochs);
     let mut trainer = Trainer::new(config)?;
+    let mut progress = Progress::new("epochs", epochs);
     for epoch in 0..epochs {
         let record = trainer.run_epoch()?;
+        progress.inc(&format!("eval return {:.1}", record.eval_return));
         metrics.append(&record)?;
         board.write(unix_s(), record.env_steps, &record.scalars())?;
         board.flush()?;
@@ -95,6 +98,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             break;
         }
     }
+    progress.finish();
     Ok(())
 }
 
