@@ -104,7 +104,9 @@ impl PolicyArgs {
         let policy = read_policy(&self.checkpoint, run_file.as_ref())?;
         // With HER the policy sees observation ++ goal: episodes step the run's goal-conditioned task.
         let her = run_file.as_ref().map(|r| r.her.clone()).unwrap_or_default();
-        let spec = her.make(task, 0)?.spec().clone();
+        // (Evaluation draws no n-step returns: 1 checks the goal against the task alone.)
+        her.validate(task, 1).map_err(anyhow::Error::msg)?;
+        let spec = her.dims(task);
         // Real NVP keeps the dimension: every level's action (and latent) is as wide as the env's.
         let (obs_dim, act_dim) = (policy.config.obs_dim, policy.config.act_dim);
         if (obs_dim, act_dim) != (spec.obs_dim, spec.act_dim) {

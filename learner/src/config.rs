@@ -132,9 +132,8 @@ impl LearnerConfig {
 
     /// Sets the agent's dimensions from the task (with HER, the goal is part of the observation).
     pub fn fitted(mut self) -> Result<Self, String> {
-        let env = self.her.make(self.task()?, 0).map_err(|e| e.to_string())?;
-        self.agent.obs_dim = env.spec().obs_dim;
-        self.agent.act_dim = env.spec().act_dim;
+        let dims = self.her.dims(self.task()?);
+        (self.agent.obs_dim, self.agent.act_dim) = (dims.obs_dim, dims.act_dim);
         Ok(self)
     }
 }

@@ -33,7 +33,7 @@ mod task;
 
 pub use error::EnvError;
 pub use spec::{EnvSpec, InitState, RewardTerms, Step};
-pub use task::Task;
+pub use task::{Dims, Task};
 
 /// One simulated task, stepped by one thread. Resets are deterministic given the seed.
 pub trait Environment: Send {

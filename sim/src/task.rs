@@ -3,6 +3,15 @@ use std::str::FromStr;
 
 use crate::{EnvError, Environment, ant_rllab::AntRllab, ant_v5::AntV5, pendulum::InvertedPendulum};
 
+/// A task's observation and action widths.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Dims {
+    /// Observation values.
+    pub obs_dim: usize,
+    /// Action values.
+    pub act_dim: usize,
+}
+
 /// The tasks this crate simulates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Task {
@@ -30,6 +39,22 @@ impl Task {
         }
     }
 
+    /// The widths of its observation and action, without loading its model: what configurations
+    /// size networks and buffers from (a test holds them equal to the built environment's).
+    pub fn dims(self) -> Dims {
+        let (obs_dim, act_dim) = match self {
+            // qpos without x, y (13) + qvel (14) + clipped contact forces of 13 bodies (78).
+            Task::AntV5 => (105, 8),
+            // ... with x, y.
+            Task::AntV5Xy => (107, 8),
+            // qpos (15) + qvel (14) + contact forces of 14 bodies (84) + torso rotation (9) + com (3).
+            Task::AntRllab => (125, 8),
+            // cart and pole position and velocity.
+            Task::InvertedPendulum => (4, 1),
+        };
+        Dims { obs_dim, act_dim }
+    }
+
     /// Builds a fresh environment whose reset-noise stream starts at `seed`.
     pub fn make(self, seed: u64) -> Result<Box<dyn Environment>, EnvError> {
         Ok(match self {
@@ -52,5 +77,20 @@ impl FromStr for Task {
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         Task::ALL.into_iter().find(|t| t.name() == s).ok_or_else(|| EnvError::UnknownTask(s.to_string()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dims_are_the_built_environments() {
+        for task in Task::ALL {
+            let mut env = task.make(0).unwrap();
+            let spec = env.spec().clone();
+            assert_eq!(task.dims(), Dims { obs_dim: spec.obs_dim, act_dim: spec.act_dim }, "{task}");
+            assert_eq!(env.reset(Some(0)).len(), spec.obs_dim, "{task}");
+        }
     }
 }

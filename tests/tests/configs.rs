@@ -1,5 +1,6 @@
 //! Every run file in `deploy/configs/` and `deploy/experiments/` parses and validates for every role,
-//! so an edit that breaks one fails here rather than when `deploy/local.sh` or `table.sh` starts it.
+//! and every role sizes its data the same (the task's widths), so an edit that breaks one fails here
+//! rather than when `deploy/local.sh` or `table.sh` starts it.
 
 use cluster::role_config;
 
@@ -20,6 +21,7 @@ fn every_deploy_config_is_valid_for_every_role() -> anyhow::Result<()> {
         role_config::<param_server::ParamServerConfig>(&text).map_err(|e| e.context(format!("{name}")))?;
         role_config::<learner::LearnerConfig>(&text).map_err(|e| e.context(format!("{name}")))?;
         role_config::<executor::ExecutorConfig>(&text).map_err(|e| e.context(format!("{name}")))?;
+        widths_agree(&text).map_err(|e| e.context(format!("{name}")))?;
         checked += 1;
     }
     assert!(checked >= 11, "only {checked} run files in {}", root.display());
@@ -43,5 +45,55 @@ fn with_frozen_levels_every_role_trains_the_level_above_settings() -> anyhow::Re
     // A key the table sets wins over the level-above default.
     let scaled = text.replace("scale_reward = 3.0", "scale_reward = 7.0");
     assert_eq!(role_config::<learner::LearnerConfig>(&scaled)?.agent.scale_reward, 7.0);
+    Ok(())
+}
+
+/// Whether every role of a run file takes the task's widths (with HER, the goal-conditioned ones):
+/// the learner's and the executors' networks, the replay server's rows, the param server's schema.
+fn widths_agree(text: &str) -> anyhow::Result<()> {
+    let learner = role_config::<learner::LearnerConfig>(text)?;
+    let executor = role_config::<executor::ExecutorConfig>(text)?;
+    let replay = role_config::<replay_server::ReplayServerConfig>(text)?;
+    let param = role_config::<param_server::ParamServerConfig>(text)?;
+    let task: sim::Task = learner.train.task.parse()?;
+    let want = learner.her.dims(task);
+    let mut widths = vec![
+        ("learner [agent]", learner.agent.obs_dim, learner.agent.act_dim),
+        ("executor [agent]", executor.agent.obs_dim, executor.agent.act_dim),
+        ("[replay_server]", replay.obs_dim as usize, replay.act_dim as usize),
+    ];
+    if let (Some(obs), Some(act)) = (param.obs_dim, param.act_dim) {
+        widths.push(("[param_server]", obs as usize, act as usize));
+    }
+    for (table, obs, act) in widths {
+        anyhow::ensure!(
+            (obs, act) == (want.obs_dim, want.act_dim),
+            "{table} has widths ({obs}, {act}), the task {task} ({}, {})",
+            want.obs_dim,
+            want.act_dim
+        );
+    }
+    Ok(())
+}
+
+#[test]
+fn a_run_file_whose_tables_disagree_fails() -> anyhow::Result<()> {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/configs/inverted-pendulum.toml");
+    let text = std::fs::read_to_string(path)?;
+    widths_agree(&text)?;
+    for (from, to) in [
+        ("[replay_server]\nobs_dim = 4", "[replay_server]\nobs_dim = 5"),
+        ("[param_server]\nobs_dim = 4", "[param_server]\nobs_dim = 105"),
+    ] {
+        let changed = text.replace(from, to);
+        assert_ne!(changed, text, "{from:?} is in the pendulum run file");
+        let err = format!("{:#}", widths_agree(&changed).unwrap_err());
+        assert!(err.contains("obs_dim") || err.contains("widths"), "{err}");
+    }
+    // A task the replay server's default widths do not fit, without its own keys: refused.
+    let ant = text.replace("task = \"inverted-pendulum\"", "task = \"ant-rllab\"");
+    assert_ne!(ant, text);
+    assert!(widths_agree(&ant).is_err());
     Ok(())
 }

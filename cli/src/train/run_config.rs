@@ -56,9 +56,8 @@ impl RunConfig {
         let task = self.train.task().map_err(anyhow::Error::msg)?;
         self.her.validate(task, self.agent.n_step).map_err(anyhow::Error::msg)?;
         // With HER the networks' input is observation ++ goal.
-        let spec = self.her.make(task, 0)?.spec().clone();
-        self.agent.obs_dim = spec.obs_dim;
-        self.agent.act_dim = spec.act_dim;
+        let dims = self.her.dims(task);
+        (self.agent.obs_dim, self.agent.act_dim) = (dims.obs_dim, dims.act_dim);
         self.agent.validate().context("[agent]")?;
         self.replay.validate(self.dims()).context("[replay]")?;
         if self.train.min_replay_size > self.replay.capacity_transitions as u64 {

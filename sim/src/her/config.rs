@@ -170,6 +170,13 @@ impl HerConfig {
         Ok(Box::new(GoalEnv::new(env, slice, self.effective_goal_range(), self.effective_threshold(), seed)))
     }
 
+    /// The widths the networks and the replay see on `task`: its observation with the goal
+    /// appended, and its action.
+    pub fn dims(&self, task: Task) -> crate::Dims {
+        let own = task.dims();
+        crate::Dims { obs_dim: own.obs_dim + self.goal_dim(task), act_dim: own.act_dim }
+    }
+
     /// The goal's length on `task` (0 with HER off or a goal the task has no slice for).
     pub fn goal_dim(&self, task: Task) -> usize {
         self.slice(task).map_or(0, |s| s.len())
@@ -247,6 +254,17 @@ mod tests {
             assert_eq!(&again[speed], &state.qvel[..], "{task}");
             let position = her(GoalKind::Position, GoalReward::Binary).slice(task).unwrap();
             assert_eq!(&again[position], &state.qpos[..2], "{task}");
+        }
+    }
+
+    #[test]
+    fn dims_are_the_goal_conditioned_environments() {
+        for goal in [GoalKind::None, GoalKind::Speed, GoalKind::Position] {
+            let her = her(goal, GoalReward::Binary);
+            for task in Task::ALL.into_iter().filter(|t| her.validate(*t, 1).is_ok()) {
+                let spec = her.make(task, 0).unwrap().spec().clone();
+                assert_eq!(her.dims(task), crate::Dims { obs_dim: spec.obs_dim, act_dim: spec.act_dim });
+            }
         }
     }
 }
