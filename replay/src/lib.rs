@@ -73,5 +73,5 @@ pub use config::{Dims, MAX_CAPACITY, ReplayConfig, SamplingMode};
 pub use error::{ConfigError, ReplayError, Result, SnapshotError};
 pub use schedule::BetaSchedule;
 pub use snapshot::{SNAPSHOT_MAGIC, SNAPSHOT_VERSION};
-pub use stats::{Counters, PriorityStats, SlotPriority};
+pub use stats::{Counters, PriorityDigest, PriorityScan, PriorityStats, SlotPriority};
 pub use sum_tree::SumTree;

@@ -1,6 +1,7 @@
 //! Counters and diagnostics of the stored priorities (for metrics such as `replay/ess`).
 //!
-//! The scans here are O(len); they are meant for periodic metrics, not for every sample.
+//! Every diagnostic is one [`PriorityScan`], O(len): meant for periodic metrics, not for every
+//! sample. The buffer's own methods scan in one go; the replay server scans a chunk per lock hold.
 
 use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
@@ -46,41 +47,143 @@ pub struct SlotPriority {
     pub priority: f64,
 }
 
-/// Orders by priority (then by age, oldest first) for the top-k heap.
-#[derive(PartialEq)]
-struct ByPriority(f64, Reverse<u64>);
+/// What a finished scan found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PriorityDigest {
+    /// Live transitions seen.
+    pub count: u64,
+    /// Smallest priority.
+    pub min: f64,
+    /// Largest priority.
+    pub max: f64,
+    /// Mean priority.
+    pub mean: f64,
+    /// Normalised effective sample size of P(i) ∝ p_i: (Σp)² / Σp² / count, in (0, 1].
+    pub ess: f64,
+    /// Highest priorities, highest first (ties: oldest first).
+    pub top: Vec<SlotPriority>,
+}
 
-impl Eq for ByPriority {}
+/// Orders entries by priority, then the older (smaller global index) first.
+#[derive(Debug, PartialEq)]
+struct Entry(f64, Reverse<u64>);
 
-impl PartialOrd for ByPriority {
+impl Eq for Entry {}
+
+impl PartialOrd for Entry {
     fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
         Some(self.cmp(other))
     }
 }
 
-impl Ord for ByPriority {
+impl Ord for Entry {
     fn cmp(&self, other: &Self) -> Ordering {
         self.0.total_cmp(&other.0).then(self.1.cmp(&other.1))
     }
 }
 
+/// A scan of the live priorities in progress: min, max, mean, effective sample size and the `k`
+/// highest. It can walk the buffer a chunk at a time (the replay server does, between lock holds,
+/// reading priorities through the public `get`): transitions overwritten between chunks are
+/// skipped and those inserted after it started are left for the next scan, so the result describes
+/// the buffer as it was over the scan.
+#[derive(Debug)]
+pub struct PriorityScan {
+    next: u64,
+    end: u64,
+    capacity: u64,
+    k: usize,
+    count: u64,
+    min: f64,
+    max: f64,
+    sum: f64,
+    sum_sq: f64,
+    top: BinaryHeap<Reverse<Entry>>,
+}
+
+impl PriorityScan {
+    /// A scan over the transitions live in `buffer` now, keeping the `k` highest.
+    pub fn new(buffer: &ReplayBuffer, k: usize) -> Self {
+        let end = buffer.counters().inserted_total;
+        Self {
+            next: end - buffer.len() as u64,
+            end,
+            capacity: buffer.capacity() as u64,
+            k,
+            count: 0,
+            min: f64::INFINITY,
+            max: 0.0,
+            sum: 0.0,
+            sum_sq: 0.0,
+            top: BinaryHeap::with_capacity(k + 1),
+        }
+    }
+
+    /// Examines up to `chunk` more transitions; true when the scan is complete.
+    pub fn step(&mut self, buffer: &ReplayBuffer, chunk: u64) -> bool {
+        let stop = self.end.min(self.next.saturating_add(chunk));
+        for g in self.next..stop {
+            let id = SlotRef { slot: g % self.capacity, generation: g / self.capacity };
+            // None: overwritten since the scan started.
+            let Some(view) = buffer.get(id) else { continue };
+            let p = view.priority;
+            self.count += 1;
+            self.min = self.min.min(p);
+            self.max = self.max.max(p);
+            self.sum += p;
+            self.sum_sq += p * p;
+            if self.k > 0 {
+                self.top.push(Reverse(Entry(p, Reverse(g))));
+                if self.top.len() > self.k {
+                    self.top.pop();
+                }
+            }
+        }
+        self.next = stop;
+        self.next >= self.end
+    }
+
+    /// The result; `None` when no live transition was seen.
+    pub fn finish(self) -> Option<PriorityDigest> {
+        if self.count == 0 {
+            return None;
+        }
+        let capacity = self.capacity;
+        let mut top: Vec<Entry> = self.top.into_iter().map(|Reverse(e)| e).collect();
+        top.sort_by(|a, b| b.cmp(a));
+        let top = top
+            .into_iter()
+            .map(|Entry(priority, Reverse(g))| SlotPriority {
+                id: SlotRef { slot: g % capacity, generation: g / capacity },
+                priority,
+            })
+            .collect();
+        Some(PriorityDigest {
+            count: self.count,
+            min: self.min,
+            max: self.max,
+            mean: self.sum / self.count as f64,
+            ess: self.sum * self.sum / self.sum_sq / self.count as f64,
+            top,
+        })
+    }
+}
+
 impl ReplayBuffer {
-    /// Priorities of the live transitions, oldest first.
-    fn live_priorities(&self) -> impl Iterator<Item = (u64, f64)> + '_ {
-        self.storage.live_globals().map(|g| (g, self.tree.get(self.storage.slot_of(g))))
+    /// Min / max / mean of the live priorities and the `k` highest, in one pass; `None` when empty.
+    pub fn priority_digest(&self, k: usize) -> Option<PriorityDigest> {
+        let mut scan = PriorityScan::new(self, k);
+        scan.step(self, u64::MAX);
+        scan.finish()
     }
 
     /// Min / max / mean of the live priorities, `None` when empty.
     pub fn priority_stats(&self) -> Option<PriorityStats> {
-        if self.is_empty() {
-            return None;
-        }
-        let min = self.live_priorities().map(|(_, p)| p).fold(f64::INFINITY, f64::min);
-        Some(PriorityStats {
-            count: self.len(),
-            min,
-            max: self.tree.max(),
-            mean: self.tree.total() / self.len() as f64,
+        self.priority_digest(0).map(|d| PriorityStats {
+            count: d.count as usize,
+            min: d.min,
+            max: d.max,
+            mean: d.mean,
         })
     }
 
@@ -88,43 +191,18 @@ impl ReplayBuffer {
     /// (Σp)² / Σp² / len, in (0, 1]; 1 when all priorities are equal, near 1/len when one dominates.
     /// `None` when empty. (Of the stored priorities, whatever the sampling mode.)
     pub fn effective_sample_size(&self) -> Option<f64> {
-        if self.is_empty() {
-            return None;
-        }
-        let (sum, sum_sq) =
-            self.live_priorities().fold((0.0f64, 0.0f64), |(s, q), (_, p)| (s + p, q + p * p));
-        Some(sum * sum / sum_sq / self.len() as f64)
+        self.priority_digest(0).map(|d| d.ess)
     }
 
     /// The `k` live transitions of highest priority, highest first (ties: oldest first).
     pub fn top_k(&self, k: usize) -> Vec<SlotPriority> {
-        if k == 0 {
-            return Vec::new();
-        }
-        // A min-heap of the best k so far: O(len log k) time, O(k) memory.
-        let mut heap: BinaryHeap<Reverse<ByPriority>> = BinaryHeap::with_capacity(k + 1);
-        for (g, p) in self.live_priorities() {
-            heap.push(Reverse(ByPriority(p, Reverse(g))));
-            if heap.len() > k {
-                heap.pop();
-            }
-        }
-        let mut best: Vec<ByPriority> = heap.into_iter().map(|Reverse(b)| b).collect();
-        best.sort_by(|a, b| b.cmp(a));
-        best.into_iter()
-            .map(|ByPriority(priority, Reverse(g))| SlotPriority {
-                id: SlotRef {
-                    slot: self.storage.slot_of(g) as u64,
-                    generation: self.storage.generation_of(g),
-                },
-                priority,
-            })
-            .collect()
+        self.priority_digest(k).map(|d| d.top).unwrap_or_default()
     }
 }
 
 #[cfg(test)]
 mod tests {
+    use super::PriorityScan;
     use crate::batch::TransitionBatch;
     use crate::{Dims, ReplayBuffer, ReplayConfig};
 
@@ -173,5 +251,51 @@ mod tests {
         assert!((top[2].priority - (2.0 + eps)).abs() < 1e-12);
         assert_eq!(buffer.top_k(10).len(), 4);
         assert!((buffer_with(&[5.0; 6]).effective_sample_size().unwrap() - 1.0).abs() < 1e-12);
+    }
+
+    fn buffer(errors: &[f32], capacity: usize) -> ReplayBuffer {
+        let cfg = ReplayConfig { capacity_transitions: capacity, alpha: 1.0, ..ReplayConfig::default() };
+        let mut buffer = ReplayBuffer::new(cfg, Dims { obs_dim: 1, act_dim: 1 }).unwrap();
+        let n = errors.len();
+        let obs: Vec<f32> = (0..n).map(|i| i as f32).collect();
+        let next: Vec<f32> = (1..=n).map(|i| i as f32).collect();
+        buffer
+            .insert_batch(TransitionBatch {
+                observations: &obs,
+                actions: &vec![0.0; n],
+                rewards: &vec![0.0; n],
+                next_observations: &next,
+                terminated: &vec![false; n],
+                abs_td_errors: Some(errors),
+            })
+            .unwrap();
+        buffer
+    }
+
+    #[test]
+    fn a_chunked_scan_agrees_with_a_whole_one() {
+        let errors: Vec<f32> = (0..50).map(|i| ((i * 37) % 11) as f32 * 0.5).collect();
+        // Capacity 32: the first 18 were overwritten, the ring has wrapped.
+        let b = buffer(&errors, 32);
+        for chunk in [1, 7, 32, 1000] {
+            let mut scan = PriorityScan::new(&b, 5);
+            while !scan.step(&b, chunk) {}
+            let digest = scan.finish().unwrap();
+            let reference = b.priority_stats().unwrap();
+            assert_eq!(digest.count, reference.count as u64);
+            assert_eq!(digest.min, reference.min);
+            assert_eq!(digest.max, reference.max);
+            assert!((digest.mean - reference.mean).abs() < 1e-12);
+            assert!((digest.ess - b.effective_sample_size().unwrap()).abs() < 1e-12);
+            assert_eq!(digest.top, b.top_k(5), "chunk {chunk}");
+        }
+    }
+
+    #[test]
+    fn empty_buffer_has_no_digest() {
+        let b = buffer(&[], 8);
+        let mut scan = PriorityScan::new(&b, 3);
+        assert!(scan.step(&b, 1 << 13));
+        assert_eq!(scan.finish(), None);
     }
 }
