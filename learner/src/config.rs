@@ -118,10 +118,6 @@ pub struct ParamServerDims {
 pub struct ReplayDeadline {
     /// `request_deadline_ms` (absent: the replay server's default).
     pub request_deadline_ms: Option<u64>,
-    /// `obs_dim` (absent: the replay server's default, Ant-v5's).
-    pub obs_dim: Option<u32>,
-    /// `act_dim` (absent: the replay server's default).
-    pub act_dim: Option<u32>,
 }
 
 impl LearnerConfig {
@@ -187,19 +183,6 @@ impl node::RoleConfig for LearnerConfig {
                 ));
             }
         }
-        // The replay server has no task: its widths are its own keys (Ant-v5's when absent).
-        let replay = &self.replay_server;
-        let (obs, act) = proto::DEFAULT_TRANSITION_DIMS;
-        for (key, theirs, ours) in [
-            ("obs_dim", replay.obs_dim.unwrap_or(obs), ours.0),
-            ("act_dim", replay.act_dim.unwrap_or(act), ours.1),
-        ] {
-            if theirs as usize != ours {
-                return Err(format!(
-                    "[replay_server] {key} = {theirs}, but the task {task}{goal} has {ours}: the replay server would refuse every transition"
-                ));
-            }
-        }
         self.agent.validate().map_err(|e| format!("[agent] {e}"))
     }
 
@@ -242,24 +225,17 @@ mod tests {
     }
 
     #[test]
-    fn the_servers_widths_must_be_the_tasks_with_its_goal() {
+    fn the_param_servers_widths_must_be_the_tasks_with_its_goal() {
         let her = "[train]\ntask = \"ant-rllab\"\n[her]\ngoal = \"speed\"\n";
-        let c = LearnerConfig::parse(&format!("{her}[replay_server]\nobs_dim = 125\n")).unwrap();
+        let c = LearnerConfig::parse(&format!("{her}[param_server]\nobs_dim = 125\n")).unwrap();
         assert_eq!(c.agent.obs_dim, 139);
         let err = c.validate().unwrap_err();
-        assert!(err.contains("[replay_server] obs_dim = 125") && err.contains("[her] goal"), "{err}");
-        let c = LearnerConfig::parse(&format!(
-            "{her}[replay_server]\nobs_dim = 139\n[param_server]\nobs_dim = 125\n"
-        ))
-        .unwrap();
-        assert!(c.validate().unwrap_err().contains("[param_server] obs_dim = 125"));
-        let ok = LearnerConfig::parse(&format!(
-            "{her}[replay_server]\nobs_dim = 139\n[param_server]\nobs_dim = 139\n"
-        ));
+        assert!(err.contains("[param_server] obs_dim = 125") && err.contains("[her] goal"), "{err}");
+        let ok = LearnerConfig::parse(&format!("{her}[param_server]\nobs_dim = 139\n"));
         assert_eq!(ok.unwrap().validate(), Ok(()));
-        // Without the keys, the replay server holds Ant-v5's widths: another task must name its own.
+        // The replay server takes its widths from the task, as the learner does: nothing to name.
         let pendulum = LearnerConfig::parse("[train]\ntask = \"inverted-pendulum\"\n").unwrap();
-        assert!(pendulum.validate().unwrap_err().contains("[replay_server] obs_dim = 105"));
+        assert_eq!(pendulum.validate(), Ok(()));
     }
 
     #[test]

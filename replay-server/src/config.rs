@@ -27,9 +27,12 @@ pub enum InitialPriority {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ReplayServerConfig {
-    /// Observation width of the task. Default 105 (ant-v5).
+    /// Observation width of the task, read from the run file's `[train] task` (with `[her]`, the
+    /// goal appended) as every role reads it, never from a key of this table. Default 105 (ant-v5).
+    #[serde(skip)]
     pub obs_dim: u32,
-    /// Action width of the task. Default 8 (ant-v5).
+    /// Action width of the task, read likewise. Default 8 (ant-v5).
+    #[serde(skip)]
     pub act_dim: u32,
     /// The prioritized buffer (`[replay_server.buffer]`): capacity, α, β, mode, and
     /// `memory_budget_bytes`, which here bounds *everything* the server holds (see [`MemoryPlan`]).
@@ -278,6 +281,19 @@ impl node::RoleConfig for ReplayServerConfig {
     fn validate(&self) -> Result<(), String> {
         self.check()
     }
+
+    /// Its table, with the widths of the run's task: `[train] task` and `[her]`, as the learner and
+    /// the executors size their networks, so no table of a run file can disagree with another.
+    fn parse(text: &str) -> Result<Self, String> {
+        let mut config: ReplayServerConfig = node::config::parse_section(text, Self::SECTION)?;
+        let keys: node::RunKeys = node::config::parse_section(text, "train")?;
+        let her: sim::her::HerConfig =
+            node::config::parse_section(text, "her").map_err(|e| format!("[her] {e}"))?;
+        let task: sim::Task = keys.task.parse().map_err(|e| format!("[train] task: {e}"))?;
+        let dims = her.dims(task);
+        (config.obs_dim, config.act_dim) = (dims.obs_dim as u32, dims.act_dim as u32);
+        Ok(config)
+    }
 }
 
 #[cfg(test)]
@@ -308,6 +324,21 @@ mod tests {
         let plan = cfg.memory_plan();
         assert_eq!(plan.replica, 0);
         assert_eq!(plan.total, plan.buffer + plan.in_flight);
+    }
+
+    #[test]
+    fn the_widths_are_the_run_tasks() {
+        let cfg =
+            ReplayServerConfig::parse("[train]\ntask = \"ant-rllab\"\n[her]\ngoal = \"speed\"\n").unwrap();
+        assert_eq!((cfg.obs_dim, cfg.act_dim), (125 + 14, 8));
+        let pendulum = ReplayServerConfig::parse("[train]\ntask = \"inverted-pendulum\"\n").unwrap();
+        assert_eq!((pendulum.obs_dim, pendulum.act_dim), (4, 1));
+        // A width of its own would be a second source: refused, named.
+        let own = ReplayServerConfig::parse("[replay_server]\nobs_dim = 4\n").unwrap_err();
+        assert!(own.contains("obs_dim"), "{own}");
+        assert!(
+            ReplayServerConfig::parse("[train]\ntask = \"walker\"\n").unwrap_err().contains("[train] task")
+        );
     }
 
     #[test]
