@@ -91,24 +91,11 @@ pub struct LearnerConfig {
     pub train: RunKeys,
     /// `[replay_server]`: the keys the learner must agree with.
     pub replay_server: ReplayDeadline,
-    /// `[param_server]`, the task dimensions it checks weights against.
-    pub param_server: ParamServerDims,
     /// `[hierarchy]`: frozen levels below the trained one (their files are read here).
     pub hierarchy: node::HierarchyKeys,
     /// `[her]`: with goals, the networks' input is observation ++ goal and evaluations step the
     /// goal-conditioned task (relabelling happens in the executors).
     pub her: sim::her::HerConfig,
-}
-
-/// The dimensions the param server builds its weights schema from, read from the shared run file
-/// so a learner whose task differs refuses to start instead of having every frame refused.
-#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
-#[serde(default)]
-pub struct ParamServerDims {
-    /// `obs_dim` (absent: the param server takes the schema from the first frame).
-    pub obs_dim: Option<u32>,
-    /// `act_dim`.
-    pub act_dim: Option<u32>,
 }
 
 /// The replay server's request deadline, read from the shared run file to check the learner's
@@ -171,18 +158,6 @@ impl node::RoleConfig for LearnerConfig {
             ));
         }
         self.her.validate(self.task()?, self.agent.n_step)?;
-        let (ours, task) = ((self.agent.obs_dim, self.agent.act_dim), &self.train.task);
-        let goal = if self.her.enabled() { " with its [her] goal" } else { "" };
-        let dims = &self.param_server;
-        for (key, theirs, ours) in [("obs_dim", dims.obs_dim, ours.0), ("act_dim", dims.act_dim, ours.1)] {
-            if let Some(theirs) = theirs
-                && theirs as usize != ours
-            {
-                return Err(format!(
-                    "[param_server] {key} = {theirs}, but the task {task}{goal} has {ours}: the param server would refuse every weights frame"
-                ));
-            }
-        }
         self.agent.validate().map_err(|e| format!("[agent] {e}"))
     }
 
@@ -225,20 +200,6 @@ mod tests {
     }
 
     #[test]
-    fn the_param_servers_widths_must_be_the_tasks_with_its_goal() {
-        let her = "[train]\ntask = \"ant-rllab\"\n[her]\ngoal = \"speed\"\n";
-        let c = LearnerConfig::parse(&format!("{her}[param_server]\nobs_dim = 125\n")).unwrap();
-        assert_eq!(c.agent.obs_dim, 139);
-        let err = c.validate().unwrap_err();
-        assert!(err.contains("[param_server] obs_dim = 125") && err.contains("[her] goal"), "{err}");
-        let ok = LearnerConfig::parse(&format!("{her}[param_server]\nobs_dim = 139\n"));
-        assert_eq!(ok.unwrap().validate(), Ok(()));
-        // The replay server takes its widths from the task, as the learner does: nothing to name.
-        let pendulum = LearnerConfig::parse("[train]\ntask = \"inverted-pendulum\"\n").unwrap();
-        assert_eq!(pendulum.validate(), Ok(()));
-    }
-
-    #[test]
     fn the_sample_timeout_must_outlast_the_replay_servers_deadline() {
         let text = |timeout: u64| {
             format!(
@@ -256,14 +217,5 @@ mod tests {
             ..LearnerConfig::parse("[train]\ntask = \"ant-v5\"\n").unwrap()
         };
         assert!(short.validate().unwrap_err().contains("(1000)"));
-    }
-
-    #[test]
-    fn the_param_servers_dimensions_must_be_the_tasks() {
-        let text =
-            |obs: u32| format!("[train]\ntask = \"ant-v5\"\n[param_server]\nobs_dim = {obs}\nact_dim = 8\n");
-        assert_eq!(LearnerConfig::parse(&text(105)).unwrap().validate(), Ok(()));
-        let err = LearnerConfig::parse(&text(27)).unwrap().validate().unwrap_err();
-        assert!(err.contains("[param_server] obs_dim = 27, but the task ant-v5 has 105"), "{err}");
     }
 }

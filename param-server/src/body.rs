@@ -3,9 +3,9 @@
 //! tensors with finite values only, and the tensor names and shapes of the run's networks. One
 //! corrupt or forged frame would otherwise reach every executor that fetches it.
 //!
-//! The schema comes from the run file (`[param_server] obs_dim`/`act_dim` with `[agent]`, through
-//! `agent::snapshot_schema`, which builds no network); a run file without the dimensions falls back
-//! to the first frame accepted, normally the learner's. Executors check each snapshot against
+//! The schema comes from the run file (`[agent]` with the widths of `[train] task` and `[her]`,
+//! through `agent::snapshot_schema`, which builds no network); a configuration without networks
+//! (tests of the store alone) falls back to the first frame accepted. Executors check each snapshot against
 //! their own networks as well, all or nothing, and keep acting when one fails.
 
 pub use agent::Schema;

@@ -29,15 +29,10 @@ pub struct ParamServerConfig {
     /// and counted (`param/rejected.learner_step/implausible_step`), so a forged frame cannot pin
     /// the barrier. Default 100 000, ~50x what the fused learner makes here.
     pub max_learner_steps_per_s: u64,
-    /// Observation width of the task. With `act_dim`, the weights frames are checked against the
-    /// tensor names and shapes of the run's `[agent]` networks from the first frame on; absent
-    /// (default), the schema is taken from the first frame accepted, so a forged frame that
-    /// arrives before the learner's would pin it. The learner refuses to start if these differ
-    /// from its task's.
-    pub obs_dim: Option<u32>,
-    /// Action width of the task; see `obs_dim`.
-    pub act_dim: Option<u32>,
-    /// The run's networks (`[agent]` with the dimensions above), read when both are set.
+    /// The run's networks: `[agent]` with the widths of `[train] task` (and `[her]`), as the
+    /// learner builds them. Every weights frame is checked against their tensor names and shapes
+    /// from the first frame on. (`None`, for tests of the store alone: the schema is taken from the
+    /// first frame accepted.)
     #[serde(skip)]
     pub networks: Option<AgentConfig>,
     /// `[hierarchy]`: the frozen levels this role serves to executors (`params/frozen`), and whose
@@ -55,8 +50,6 @@ impl Default for ParamServerConfig {
             announce_interval_ms: 200,
             stats_interval_ms: 1000,
             max_learner_steps_per_s: crate::step_guard::DEFAULT_MAX_LEARNER_STEPS_PER_S,
-            obs_dim: None,
-            act_dim: None,
             networks: None,
             hierarchy: node::HierarchyKeys::default(),
         }
@@ -93,26 +86,27 @@ impl node::RoleConfig for ParamServerConfig {
         if let Some(key) = node::config::first_zero(&positive) {
             return Err(format!("{key} must be > 0"));
         }
-        match (self.obs_dim, self.act_dim, &self.networks) {
-            (None, None, None) => Ok(()),
-            (Some(_), Some(_), Some(networks)) => networks.validate().map_err(|e| format!("[agent] {e}")),
-            _ => Err("obs_dim and act_dim must be set together (or neither)".into()),
+        match &self.networks {
+            None => Ok(()),
+            Some(networks) => networks.validate().map_err(|e| format!("[agent] {e}")),
         }
     }
 
-    /// The `[param_server]` and `[hierarchy]` tables; with both dimensions set, also the `[agent]`
-    /// table (over the level-above defaults in a hierarchy).
+    /// The `[param_server]` and `[hierarchy]` tables, and the run's networks: the `[agent]` table
+    /// (over the level-above defaults in a hierarchy) with the widths of `[train] task` and `[her]`.
     fn parse(text: &str) -> Result<Self, String> {
         let mut config: Self = node::config::parse_section(text, Self::SECTION)?;
         config.hierarchy =
             node::config::parse_section(text, "hierarchy").map_err(|e| format!("[hierarchy] {e}"))?;
-        if let (Some(obs_dim), Some(act_dim)) = (config.obs_dim, config.act_dim) {
-            let base = AgentConfig::default_at_level(config.hierarchy.depth());
-            let agent: AgentConfig =
-                node::config::parse_section_over(text, "agent", &base).map_err(|e| format!("[agent] {e}"))?;
-            config.networks =
-                Some(AgentConfig { obs_dim: obs_dim as usize, act_dim: act_dim as usize, ..agent });
-        }
+        let keys: node::RunKeys = node::config::parse_section(text, "train")?;
+        let her: sim::her::HerConfig =
+            node::config::parse_section(text, "her").map_err(|e| format!("[her] {e}"))?;
+        let task: sim::Task = keys.task.parse().map_err(|e| format!("[train] task: {e}"))?;
+        let dims = her.dims(task);
+        let base = AgentConfig::default_at_level(config.hierarchy.depth());
+        let agent: AgentConfig =
+            node::config::parse_section_over(text, "agent", &base).map_err(|e| format!("[agent] {e}"))?;
+        config.networks = Some(AgentConfig { obs_dim: dims.obs_dim, act_dim: dims.act_dim, ..agent });
         Ok(config)
     }
 }
@@ -133,24 +127,25 @@ mod tests {
         let parsed = ParamServerConfig::parse("[param_server]\nmax_weight_lag = 3\n").unwrap();
         assert_eq!(parsed.max_weight_lag, Some(3));
         assert!(ParamServerConfig::parse("[param_server]\nmax_wieght_lag = 3\n").is_err());
-        assert_eq!(parsed.weights_schema(), None);
+        assert!(parsed.weights_schema().is_some(), "the default task's networks");
     }
 
     #[test]
-    fn the_dimensions_bring_the_run_s_networks() {
-        let text = "[agent]\ncritic_hidden = [4]\ntwin_q = true\n[param_server]\nobs_dim = 3\nact_dim = 2\n";
+    fn the_task_brings_the_run_s_networks() {
+        let text = "[train]\ntask = \"inverted-pendulum\"\n[agent]\ncritic_hidden = [4]\ntwin_q = true\n";
         let parsed = ParamServerConfig::parse(text).unwrap();
         assert_eq!(parsed.validate(), Ok(()));
         let networks = parsed.networks.clone().unwrap();
-        assert_eq!((networks.obs_dim, networks.act_dim, networks.critic_hidden.as_slice()), (3, 2, &[4][..]));
+        assert_eq!((networks.obs_dim, networks.act_dim, networks.critic_hidden.as_slice()), (4, 1, &[4][..]));
         let schema = parsed.weights_schema().unwrap();
-        assert_eq!(schema["q1.layer0.weight_observation"], vec![4, 3]);
+        assert_eq!(schema["q1.layer0.weight_observation"], vec![4, 4]);
         assert!(schema.contains_key("q2.layer0.weight_action"));
-        // One dimension alone, or bad networks, are named.
-        let half = ParamServerConfig::parse("[param_server]\nobs_dim = 3\n").unwrap();
-        assert!(half.validate().unwrap_err().contains("obs_dim and act_dim"));
-        let bad = ParamServerConfig::parse("[agent]\ntau = 2.0\n[param_server]\nobs_dim = 3\nact_dim = 2\n")
-            .unwrap();
+        // With HER the goal widens the input; widths of its own are refused; bad networks are named.
+        let her =
+            ParamServerConfig::parse("[train]\ntask = \"ant-rllab\"\n[her]\ngoal = \"speed\"\n").unwrap();
+        assert_eq!(her.networks.unwrap().obs_dim, 139);
+        assert!(ParamServerConfig::parse("[param_server]\nobs_dim = 3\n").unwrap_err().contains("obs_dim"));
+        let bad = ParamServerConfig::parse("[agent]\ntau = 2.0\n").unwrap();
         let err = bad.validate().unwrap_err();
         assert!(err.starts_with("[agent]") && err.contains("tau must be"), "{err}");
     }

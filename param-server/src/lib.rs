@@ -98,8 +98,8 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
             state = state.with_schema(schema);
         }
         None => tracing::warn!(
-            "[param_server] names no obs_dim/act_dim: the weights schema is taken from the first \
-             frame accepted, so a forged frame arriving before the learner's would pin it"
+            "no networks configured: the weights schema is taken from the first frame accepted, so a \
+             forged frame arriving before the learner's would pin it"
         ),
     }
     if let Some((hash, _)) = &frozen {

@@ -62,8 +62,8 @@ fn widths_agree(text: &str) -> anyhow::Result<()> {
         ("executor [agent]", executor.agent.obs_dim, executor.agent.act_dim),
         ("[replay_server]", replay.obs_dim as usize, replay.act_dim as usize),
     ];
-    if let (Some(obs), Some(act)) = (param.obs_dim, param.act_dim) {
-        widths.push(("[param_server]", obs as usize, act as usize));
+    if let Some(networks) = &param.networks {
+        widths.push(("[param_server] networks", networks.obs_dim, networks.act_dim));
     }
     for (table, obs, act) in widths {
         anyhow::ensure!(
@@ -77,22 +77,22 @@ fn widths_agree(text: &str) -> anyhow::Result<()> {
 }
 
 #[test]
-fn a_run_file_whose_tables_disagree_fails() -> anyhow::Result<()> {
+fn a_run_file_cannot_give_a_role_other_widths() -> anyhow::Result<()> {
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/configs/inverted-pendulum.toml");
     let text = std::fs::read_to_string(path)?;
     widths_agree(&text)?;
-    let changed = text.replace("[param_server]\nobs_dim = 4", "[param_server]\nobs_dim = 105");
-    assert_ne!(changed, text, "the pendulum run file names the param server's widths");
-    let err = format!("{:#}", widths_agree(&changed).unwrap_err());
-    assert!(err.contains("obs_dim"), "{err}");
-    // The replay server follows the task: a pendulum file switched to another task disagrees only
-    // where it still names the pendulum's widths (the param server's).
+    // Every role follows the task: switched to another task, every width follows.
     let ant = text.replace("task = \"inverted-pendulum\"", "task = \"ant-rllab\"");
     assert_ne!(ant, text);
-    assert!(widths_agree(&ant).is_err());
-    let ant_only = ant.replace("obs_dim = 4\nact_dim = 1\n", "");
-    widths_agree(&ant_only)?;
-    assert_eq!(role_config::<replay_server::ReplayServerConfig>(&ant_only)?.obs_dim, 125);
+    widths_agree(&ant)?;
+    assert_eq!(role_config::<replay_server::ReplayServerConfig>(&ant)?.obs_dim, 125);
+    // A width of a server's own would be a second source that could disagree: refused, named.
+    for table in ["replay_server", "param_server"] {
+        let own = text.replace(&format!("[{table}]\n"), &format!("[{table}]\nobs_dim = 4\n"));
+        let own = if own == text { format!("{text}\n[{table}]\nobs_dim = 4\n") } else { own };
+        let err = format!("{:#}", widths_agree(&own).unwrap_err());
+        assert!(err.contains("obs_dim"), "{table}: {err}");
+    }
     Ok(())
 }

@@ -45,7 +45,6 @@ async fn her_executors_publish_goal_conditioned_and_relabelled_experience() -> a
     // Speed goals on ant-v5: qvel (14 values) appended to the 105-d observation.
     let config = Spec::tiny("", 1)
         .config
-        .replace("obs_dim = 105", "obs_dim = 119")
         // Wider rows: the in-flight message bound grows with them.
         .replace("memory_budget_bytes = 268435456", "memory_budget_bytes = 536870912")
         + "\n[her]\ngoal = \"speed\"\nreward = \"binary\"\n";
