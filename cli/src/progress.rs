@@ -19,7 +19,7 @@ impl Progress {
     pub fn new(what: &'static str, len: u64) -> Progress {
         let bar = std::io::stderr().is_terminal().then(|| {
             let bar = ProgressBar::new(len);
-            let template = format!("{{prefix}} [{{bar:30}}] {{pos}}/{{len}} {what} ({{eta}} left) {{msg}}");
+            let template = format!("[{{bar:30}}] {{pos}}/{{len}} {what} ({{eta}} left) {{msg}}");
             if let Ok(style) = ProgressStyle::with_template(&template) {
                 bar.set_style(style.progress_chars("=> "));
             }
