@@ -205,7 +205,7 @@ mod tests {
             format!(
                 "[train]\ntask = \"ant-v5\"\n[learner]\nsample_timeout_ms = {timeout}\n\
                  [replay_server]\nrequest_deadline_ms = 3000\nmin_size_to_sample = 10\n\
-                 [replay_server.buffer]\ncapacity_transitions = 100\n"
+                 [replay]\ncapacity_transitions = 100\n"
             )
         };
         assert_eq!(LearnerConfig::parse(&text(3001)).unwrap().validate(), Ok(()));

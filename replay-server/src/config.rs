@@ -1,4 +1,5 @@
-//! `[replay_server]` table of the run configuration, with `[replay_server.buffer]` for the buffer.
+//! `[replay_server]` table of the run configuration; the buffer's settings are the run's `[replay]`
+//! table, the one single-machine runs read too.
 //!
 //! `validate` refuses, with a message that names the key and says why, every configuration that
 //! could not run or could hang: a minimum size the buffer can never reach, a rate limiter whose
@@ -34,8 +35,9 @@ pub struct ReplayServerConfig {
     /// Action width of the task, read likewise. Default 8 (ant-v5).
     #[serde(skip)]
     pub act_dim: u32,
-    /// The prioritized buffer (`[replay_server.buffer]`): capacity, α, β, mode, and
+    /// The buffer: the run file's `[replay]` table (capacity, α, β, mode, and
     /// `memory_budget_bytes`, which here bounds *everything* the server holds (see [`MemoryPlan`]).
+    #[serde(skip)]
     pub buffer: ReplayConfig,
     /// Source of new transitions' priorities. Default `td_error`.
     pub initial_priority: InitialPriority,
@@ -107,7 +109,7 @@ pub const MAX_TOP_K: u32 = 256;
 /// Longest deadline accepted for a blocked request (a minute: far beyond any sane learner timeout).
 pub const MAX_REQUEST_DEADLINE_MS: u64 = 60_000;
 
-/// Bytes the server may hold, by part; `total` is checked against `buffer.memory_budget_bytes`.
+/// Bytes the server may hold, by part; `total` is checked against `[replay] memory_budget_bytes`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct MemoryPlan {
     /// The buffer's storage and sum tree (`ReplayBuffer::bytes_for`).
@@ -176,7 +178,7 @@ impl ReplayServerConfig {
         if self.act_dim == 0 || self.act_dim > proto::MAX_DIM {
             return Err(format!("act_dim must be in 1..={}, got {}", proto::MAX_DIM, self.act_dim));
         }
-        self.buffer.validate(self.dims()).map_err(|e| format!("buffer: {e}"))?;
+        self.buffer.validate(self.dims()).map_err(|e| format!("[replay] {e}"))?;
         if self.max_batch_size == 0 || self.max_batch_size > max_batch {
             return Err(format!("max_batch_size must be in 1..={max_batch}, got {}", self.max_batch_size));
         }
@@ -227,7 +229,7 @@ impl ReplayServerConfig {
         let capacity = self.buffer.capacity_transitions as u64;
         if min > capacity {
             return Err(format!(
-                "min_size_to_sample ({min}) exceeds buffer.capacity_transitions ({capacity}): the buffer could \
+                "min_size_to_sample ({min}) exceeds [replay] capacity_transitions ({capacity}): the buffer could \
                  never hold enough to sample, and every sample request would wait forever"
             ));
         }
@@ -235,8 +237,8 @@ impl ReplayServerConfig {
         if min > guaranteed {
             return Err(format!(
                 "min_size_to_sample ({min}) exceeds the {guaranteed} transitions the buffer is sure to hold \
-                 (buffer.observation_rows / 2 = {}): with short episodes it could never be reached; raise \
-                 buffer.observation_rows or lower min_size_to_sample",
+                 ([replay] observation_rows / 2 = {}): with short episodes it could never be reached; raise \
+                 [replay] observation_rows or lower min_size_to_sample",
                 self.buffer.observation_rows_resolved() / 2
             ));
         }
@@ -265,8 +267,8 @@ impl ReplayServerConfig {
         if plan.total > budget {
             return Err(format!(
                 "the replay server needs {} bytes (buffer {}, snapshot replica {}, replica log {}, in-flight \
-                 messages {}), more than buffer.memory_budget_bytes {budget}; raise the budget, lower \
-                 buffer.capacity_transitions, subscriber_queue_messages or max_insert_transitions, or turn \
+                 messages {}), more than [replay] memory_budget_bytes {budget}; raise the budget, lower \
+                 [replay] capacity_transitions, subscriber_queue_messages or max_insert_transitions, or turn \
                  snapshots off",
                 plan.total, plan.buffer, plan.replica, plan.replica_log, plan.in_flight
             ));
@@ -282,10 +284,16 @@ impl node::RoleConfig for ReplayServerConfig {
         self.check()
     }
 
-    /// Its table, with the widths of the run's task: `[train] task` and `[her]`, as the learner and
+    /// Its table, the buffer's (`[replay]`), and the widths of the run's task: `[train] task` and `[her]`, as the learner and
     /// the executors size their networks, so no table of a run file can disagree with another.
     fn parse(text: &str) -> Result<Self, String> {
+        if text.lines().any(|l| l.trim_start().starts_with("[replay_server.buffer]")) {
+            return Err("[replay_server.buffer] is now [replay]: one table holds the buffer's settings for \
+                        single-machine and distributed runs"
+                .into());
+        }
         let mut config: ReplayServerConfig = node::config::parse_section(text, Self::SECTION)?;
+        config.buffer = node::config::parse_section(text, "replay").map_err(|e| format!("[replay] {e}"))?;
         let keys: node::RunKeys = node::config::parse_section(text, "train")?;
         let her: sim::her::HerConfig =
             node::config::parse_section(text, "her").map_err(|e| format!("[her] {e}"))?;
@@ -342,21 +350,26 @@ mod tests {
     }
 
     #[test]
-    fn toml_table_with_nested_buffer_parses() {
+    fn the_buffer_is_the_runs_replay_table() {
         let text = "[replay_server]\nmin_size_to_sample = 50\nsamples_per_insert = 8.0\n\
-                    [replay_server.buffer]\ncapacity_transitions = 500\n";
-        let cfg: ReplayServerConfig = node::config::parse_section(text, "replay_server").unwrap();
+                    [replay]\ncapacity_transitions = 500\nmode = \"uniform\"\n";
+        let cfg = ReplayServerConfig::parse(text).unwrap();
         assert_eq!(cfg.buffer.capacity_transitions, 500);
+        assert_eq!(cfg.buffer.mode, replay::SamplingMode::Uniform);
         assert_eq!(cfg.samples_per_insert, Some(8.0));
         let typo = "[replay_server]\nmin_size = 50\n";
-        assert!(node::config::parse_section::<ReplayServerConfig>(typo, "replay_server").is_err());
+        assert!(ReplayServerConfig::parse(typo).is_err());
+        let old =
+            "[replay_server]\nmin_size_to_sample = 50\n[replay_server.buffer]\ncapacity_transitions = 500\n";
+        assert!(ReplayServerConfig::parse(old).unwrap_err().contains("is now [replay]"));
+        assert!(ReplayServerConfig::parse("[replay]\ncapacity = 5\n").unwrap_err().starts_with("[replay]"));
     }
 
     #[test]
     fn deadlocking_limiters_are_refused_with_reasons() {
         let msg = message(ReplayServerConfig { min_size_to_sample: 1001, ..small() });
         assert!(
-            msg.starts_with("min_size_to_sample (1001) exceeds buffer.capacity_transitions (1000)"),
+            msg.starts_with("min_size_to_sample (1001) exceeds [replay] capacity_transitions (1000)"),
             "{msg}"
         );
         let rows = ReplayConfig { capacity_transitions: 1000, observation_rows: Some(600), ..small().buffer };
@@ -408,7 +421,7 @@ mod tests {
         let buffer = ReplayConfig { alpha: 2.0, ..small().buffer };
         assert_eq!(
             message(ReplayServerConfig { buffer, ..small() }),
-            "buffer: alpha must be in [0, 1], got 2"
+            "[replay] alpha must be in [0, 1], got 2"
         );
     }
 

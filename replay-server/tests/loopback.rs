@@ -293,7 +293,7 @@ async fn killed_process_restarts_from_its_periodic_snapshot() {
         format!(
             "[replay_server]\nmin_size_to_sample = 256\nmax_batch_size = 256\nstats_interval_ms = 100\n\
              request_deadline_ms = 10000\n\
-             snapshot_path = {:?}\nsnapshot_interval_s = 1\n[replay_server.buffer]\ncapacity_transitions = 10000\n",
+             snapshot_path = {:?}\nsnapshot_interval_s = 1\n[replay]\ncapacity_transitions = 10000\n",
             snapshot.display().to_string()
         ),
     )
@@ -360,7 +360,7 @@ async fn a_deadlocking_configuration_is_refused_at_start() {
     let error = within("run to refuse", replay_server::run(cfg, bus, shutdown)).await.unwrap_err();
     let message = error.to_string();
     assert!(
-        message.contains("min_size_to_sample (20000) exceeds buffer.capacity_transitions (10000)"),
+        message.contains("min_size_to_sample (20000) exceeds [replay] capacity_transitions (10000)"),
         "{message}"
     );
 }

@@ -44,6 +44,19 @@ pub struct TrainArgs {
     /// Output folder for metrics.csv and checkpoints (default runs/train-<task>-<unix seconds>).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// How batches are drawn (overrides `[replay] mode`): `uniform` is the dissertation's
+    /// "SAC-LSP", `prioritized` its "Prioritized SAC-LSP".
+    #[arg(long, value_enum)]
+    replay_mode: Option<ReplayMode>,
+}
+
+/// `--replay-mode`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum ReplayMode {
+    /// Uniform sampling.
+    Uniform,
+    /// Proportional prioritized sampling.
+    Prioritized,
 }
 
 /// Runs `sac-lsp train`.
@@ -54,6 +67,12 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     }
     config.train.seed = args.seed.unwrap_or(config.train.seed);
     config.train.epochs = args.epochs.unwrap_or(config.train.epochs);
+    if let Some(mode) = args.replay_mode {
+        config.replay.mode = match mode {
+            ReplayMode::Uniform => replay::SamplingMode::Uniform,
+            ReplayMode::Prioritized => replay::SamplingMode::Prioritized,
+        };
+    }
     let config = config.fitted()?;
     let out = match &args.out {
         Some(dir) => dir.clone(),
