@@ -207,7 +207,12 @@ mod tests {
     use crate::{Dims, ReplayBuffer, ReplayConfig};
 
     fn buffer_with(errors: &[f32]) -> ReplayBuffer {
-        let cfg = ReplayConfig { capacity_transitions: 16, alpha: 1.0, ..ReplayConfig::default() };
+        buffer(errors, 16)
+    }
+
+    /// A buffer of `capacity` holding one transition per error, α = 1 (priority = |δ| + ε).
+    fn buffer(errors: &[f32], capacity: usize) -> ReplayBuffer {
+        let cfg = ReplayConfig { capacity_transitions: capacity, alpha: 1.0, ..ReplayConfig::default() };
         let mut buffer = ReplayBuffer::new(cfg, Dims { obs_dim: 1, act_dim: 1 }).unwrap();
         let n = errors.len();
         let obs: Vec<f32> = (0..n).map(|i| i as f32).collect();
@@ -251,25 +256,6 @@ mod tests {
         assert!((top[2].priority - (2.0 + eps)).abs() < 1e-12);
         assert_eq!(buffer.top_k(10).len(), 4);
         assert!((buffer_with(&[5.0; 6]).effective_sample_size().unwrap() - 1.0).abs() < 1e-12);
-    }
-
-    fn buffer(errors: &[f32], capacity: usize) -> ReplayBuffer {
-        let cfg = ReplayConfig { capacity_transitions: capacity, alpha: 1.0, ..ReplayConfig::default() };
-        let mut buffer = ReplayBuffer::new(cfg, Dims { obs_dim: 1, act_dim: 1 }).unwrap();
-        let n = errors.len();
-        let obs: Vec<f32> = (0..n).map(|i| i as f32).collect();
-        let next: Vec<f32> = (1..=n).map(|i| i as f32).collect();
-        buffer
-            .insert_batch(TransitionBatch {
-                observations: &obs,
-                actions: &vec![0.0; n],
-                rewards: &vec![0.0; n],
-                next_observations: &next,
-                terminated: &vec![false; n],
-                abs_td_errors: Some(errors),
-            })
-            .unwrap();
-        buffer
     }
 
     #[test]
