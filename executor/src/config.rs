@@ -26,7 +26,25 @@ pub struct ExecutorSettings {
     pub max_episode_steps: Option<u32>,
     /// How often the role publishes its stats, in milliseconds. Default 1000.
     pub stats_interval_ms: u64,
+    /// Durable experience: keep every published batch in `<spool_dir>/executor-<id>/` until the
+    /// replay server's snapshot holds it, and send it again when a replay server (re)starts (see
+    /// `spool.rs`). Needs the replay server's snapshots on (`[replay_server] snapshot_path`), or
+    /// nothing is ever released and the spool only drops its oldest past `spool_max_bytes`. The
+    /// environment variable `SACLSP_SPOOL_DIR` overrides it (`deploy/local.sh` with `DURABLE=1`).
+    /// Default none: no spool; a batch the replay server misses is lost.
+    pub spool_dir: Option<std::path::PathBuf>,
+    /// Disk the spool may hold; past it the oldest batches are dropped (counted, in the ledger as
+    /// `dropped spool_overflow`). It must hold what one executor sends between two snapshots: about
+    /// (obs_dim × 2 + act_dim + 3) × 4 bytes per transition (900 B on ant-v5) times its env steps
+    /// per second (150 with 8 executors on 2 cores) times `snapshot_interval_s` plus the snapshot's
+    /// write time (~12 MB for 60 s). Disk only: the spool holds nothing in memory but its index.
+    /// Default 256 MiB.
+    pub spool_max_bytes: u64,
 }
+
+/// `SACLSP_SPOOL_DIR`: overrides `[executor] spool_dir`, so a launcher can put each run's spools in
+/// its folder without editing the shared run file.
+pub const SPOOL_DIR_ENV: &str = "SACLSP_SPOOL_DIR";
 
 impl Default for ExecutorSettings {
     fn default() -> Self {
@@ -37,6 +55,8 @@ impl Default for ExecutorSettings {
             weights_timeout_ms: 2000,
             max_episode_steps: None,
             stats_interval_ms: 1000,
+            spool_dir: None,
+            spool_max_bytes: 256 << 20,
         }
     }
 }
@@ -83,6 +103,7 @@ impl node::RoleConfig for ExecutorConfig {
             ("wait_deadline_ms", s.wait_deadline_ms),
             ("weights_timeout_ms", s.weights_timeout_ms),
             ("stats_interval_ms", s.stats_interval_ms),
+            ("spool_max_bytes", s.spool_max_bytes),
         ];
         if let Some(key) = node::config::first_zero(&positive) {
             return Err(format!("[executor] {key} must be > 0"));
@@ -100,6 +121,9 @@ impl node::RoleConfig for ExecutorConfig {
         let base = AgentConfig::default_at_level(config.hierarchy.depth());
         config.agent =
             node::config::parse_section_over(text, "agent", &base).map_err(|e| format!("[agent] {e}"))?;
+        if let Some(dir) = std::env::var_os(SPOOL_DIR_ENV) {
+            config.executor.spool_dir = Some(dir.into());
+        }
         config.fitted()
     }
 }

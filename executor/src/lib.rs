@@ -15,6 +15,8 @@
 //! | `control/barrier/<id>`      | out       | `BarrierReport` every `report_interval_ms` and on each block/unblock |
 //! | `stats/executor/<id>`       | out       | `StatsReport`: env steps/s, weights lag, what it waits on |
 //! | `liveliness/executor/<id>`  | token     | declared once subscribed: the param server counts it live |
+//! | `replay/durable`            | in        | `DurableMarks`: spooled batches the replay server made durable |
+//! | `liveliness/replay/*`       | watch     | a replay server appearing: the spool is sent again    |
 //!
 //! # Layout
 //!
@@ -26,6 +28,7 @@
 //! | `worker.rs`  | the rollout thread: barrier, waits with reasons, loading weights          |
 //! | `weights.rs` | the weights fetch task: a `get` whenever a newer version is announced     |
 //! | `frozen.rs`  | a hierarchy's frozen levels, fetched once and checked against their hash  |
+//! | `spool.rs`   | [`Spool`]: published batches on disk until durable (`[executor] spool_dir`) |
 //! | `stats.rs`   | the stats report                                                          |
 //!
 //! The environment and the networks run on their own thread; the async shell only moves messages,
@@ -36,6 +39,7 @@ mod config;
 mod frozen;
 mod inbox;
 mod rollout;
+mod spool;
 mod stats;
 mod weights;
 mod worker;
@@ -47,11 +51,13 @@ use agent::{Actor, PolicyStack};
 pub use config::{ExecutorConfig, ExecutorSettings};
 pub use inbox::{Control, Inbox, Taken};
 use node::{Bus, Rejects, Shutdown};
-use proto::{GlobalStep, topics};
+use proto::{DurableMarks, GlobalStep, topics};
 pub use rollout::{Rollout, StepOutcome};
+pub use spool::{Spool, SpoolCounts};
 use tokio::sync::{mpsc, watch};
 pub use worker::{Out, Progress, Wait, WorkerReport};
 use zenoh::qos::CongestionControl;
+use zenoh::sample::SampleKind;
 
 /// What the role did, returned when it stops.
 #[derive(Debug, Default, Clone, PartialEq)]
@@ -66,6 +72,8 @@ pub struct Report {
     pub batches_published: u64,
     /// Rejected inputs by reason.
     pub rejected: std::collections::BTreeMap<String, u64>,
+    /// The spool's figures at shutdown, when it spools.
+    pub spool: Option<SpoolCounts>,
 }
 
 /// Seeds of executor `id` in a run seeded `seed`: distinct streams per executor (splitmix64).
@@ -101,9 +109,17 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
         }
     };
     let actor = Actor::with_stack(config.agent.clone(), stack, seed.wrapping_add(1))?;
+    let mut spool = match &config.executor.spool_dir {
+        Some(dir) => Some(
+            Spool::open(dir, id, config.executor.spool_max_bytes)
+                .map_err(|e| anyhow::anyhow!("opening the spool in {}: {e}", dir.display()))?,
+        ),
+        None => None,
+    };
     let rollout = Rollout::new(id, env, actor, seed)
         .with_episode_limit(config.executor.max_episode_steps)
-        .with_hindsight(hindsight);
+        .with_hindsight(hindsight)
+        .with_stream(if spool.is_some() { new_stream() } else { 0 });
 
     let session = bus.session().clone();
     let run = bus.run().clone();
@@ -114,8 +130,17 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
         .congestion_control(CongestionControl::Block)
         .await
         .map_err(z)?;
+    let durable_sub = session.declare_subscriber(topics::replay_durable(&run)).await.map_err(z)?;
+    // Current tokens are delivered at declaration: a replay server already up counts as appearing,
+    // so what earlier runs of this executor left in the spool is sent at once.
+    let replay_sub = session
+        .liveliness()
+        .declare_subscriber(topics::liveliness_role(&run, proto::Role::Replay))
+        .history(true)
+        .await
+        .map_err(z)?;
     let _alive = bus.announce().await?;
-    tracing::info!(seed, task = %config.train.task, "executor up");
+    tracing::info!(seed, task = %config.train.task, spool = spool.is_some(), "executor up");
 
     let inbox = Arc::new(Inbox::default());
     let (out_tx, mut out_rx) = mpsc::channel(64);
@@ -155,16 +180,34 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
                 Err(error) => lock(&rejects).decode_failed("step", &error),
             },
             message = out_rx.recv() => match message {
-                Some(message) => publish(&bus, &experience_pub, id, message, &mut report, &rejects).await,
+                Some(message) => {
+                    let spool = spool.as_mut();
+                    publish(&bus, &experience_pub, id, message, &mut report, &rejects, spool).await;
+                }
                 None => { worker_done = true; break; }
             },
+            Ok(sample) = durable_sub.recv_async() => match proto::decode::<DurableMarks>(&sample.payload().to_bytes()) {
+                Ok(marks) => if let Some(spool) = spool.as_mut()
+                    && let Err(error) = spool.on_marks(&marks)
+                {
+                    tracing::warn!(%error, "could not release durable batches from the spool");
+                },
+                Err(error) => lock(&rejects).decode_failed("durable", &error),
+            },
+            Ok(sample) = replay_sub.recv_async() => {
+                if sample.kind() == SampleKind::Put && let Some(spool) = spool.as_mut() {
+                    resend(spool, &experience_pub).await;
+                }
+            }
         }
     }
     inbox.stop();
     // Drain what the thread still sends (its final flush) until it hangs up.
     while !worker_done {
         match tokio::time::timeout(Duration::from_secs(10), out_rx.recv()).await {
-            Ok(Some(message)) => publish(&bus, &experience_pub, id, message, &mut report, &rejects).await,
+            Ok(Some(message)) => {
+                publish(&bus, &experience_pub, id, message, &mut report, &rejects, spool.as_mut()).await;
+            }
             Ok(None) => worker_done = true,
             Err(_) => anyhow::bail!("the rollout thread did not stop within 10 s"),
         }
@@ -177,7 +220,8 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
     report.weights_fetched = fetcher.await?;
     report.uptime_s = started.elapsed().as_secs_f64();
     report.rejected = lock(&rejects).counts().clone();
-    drop((step_sub, experience_pub));
+    report.spool = spool.as_ref().map(Spool::counts);
+    drop((step_sub, experience_pub, durable_sub, replay_sub));
     bus.close().await?;
     Ok(report)
 }
@@ -187,6 +231,30 @@ fn lock(rejects: &Mutex<Rejects>) -> std::sync::MutexGuard<'_, Rejects> {
     rejects.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
+/// A fresh stream id for this process's batches: nonzero, and (from the clock and the process id)
+/// not one an earlier run of this executor used.
+fn new_stream() -> u64 {
+    let nanos =
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
+    executor_seed(nanos, std::process::id()).max(1)
+}
+
+/// Sends every batch the spool holds again, oldest first (the replay server stores each once).
+async fn resend(spool: &mut Spool, experience: &zenoh::pubsub::Publisher<'_>) {
+    let held = spool.held();
+    if held.is_empty() {
+        return;
+    }
+    tracing::info!(batches = held.len(), "a replay server appeared: sending the spool again");
+    for key in held {
+        let Some(frame) = spool.resend(key) else { continue };
+        if let Err(error) = experience.put(frame).await {
+            tracing::warn!(%error, "re-send failed");
+            return;
+        }
+    }
+}
+
 async fn publish(
     bus: &Bus,
     experience: &zenoh::pubsub::Publisher<'_>,
@@ -194,17 +262,36 @@ async fn publish(
     message: Out,
     report: &mut Report,
     rejects: &Mutex<Rejects>,
+    spool: Option<&mut Spool>,
 ) {
     let run = bus.run();
     let result = match message {
         Out::Experience(batch) => {
-            report.batches_published += 1;
-            experience.put(proto::encode(&batch)).await.map_err(node::NodeError::zenoh)
+            let frame = match spool {
+                // The spool keeps it until it is durable; a batch failing the wire checks is
+                // dropped there, counted.
+                Some(spool) => match spool.push(&batch) {
+                    Ok(frame) => frame,
+                    Err(error) => {
+                        tracing::error!(%error, "could not spool a batch; sending it unspooled");
+                        Some(proto::encode(&batch))
+                    }
+                },
+                None => Some(proto::encode(&batch)),
+            };
+            match frame {
+                Some(frame) => {
+                    report.batches_published += 1;
+                    experience.put(frame).await.map_err(node::NodeError::zenoh)
+                }
+                None => Ok(()),
+            }
         }
         Out::Episode(episode) => bus.put(&topics::episodes(run, id), &episode).await,
         Out::Barrier(barrier) => bus.put(&topics::control_barrier(run, id), &barrier).await,
         Out::Progress(progress) => {
-            let stats = stats::report(bus.node(), &progress, &lock(rejects));
+            let counts = spool.map(|s| s.counts());
+            let stats = stats::report(bus.node(), &progress, &lock(rejects), counts);
             bus.put_stats(&stats).await
         }
     };

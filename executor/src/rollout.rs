@@ -36,6 +36,8 @@ pub struct Rollout {
     episode_return: f64,
     episode_length: u32,
     env_steps: u64,
+    /// The batches' stream (see [`ExperienceBatch::stream`]) and the next batch's number in it.
+    stream: u64,
     seq: u64,
     /// Episodes are cut (as truncated) at this length: the task's limit or a shorter one.
     episode_limit: u32,
@@ -73,6 +75,7 @@ impl Rollout {
             episode_return: 0.0,
             episode_length: 0,
             env_steps: 0,
+            stream: 0,
             seq: 0,
             episode_limit: spec.max_episode_steps,
         }
@@ -84,6 +87,13 @@ impl Rollout {
         if let Some(limit) = limit {
             self.episode_limit = self.episode_limit.min(limit.max(1));
         }
+        self
+    }
+
+    /// Numbers batches in `stream` (nonzero for a spooling executor: the replay server then stores
+    /// each batch once however often it is sent).
+    pub fn with_stream(mut self, stream: u64) -> Self {
+        self.stream = stream;
         self
     }
 
@@ -215,6 +225,7 @@ impl Rollout {
         let td_errors = self.actor.td_errors(&batch)?.iter().map(|d| d.abs()).collect();
         let experience = ExperienceBatch {
             executor_id: self.executor_id,
+            stream: self.stream,
             seq: self.seq,
             weights_version: self.actor.version().unwrap_or(0),
             env_steps: self.env_steps,

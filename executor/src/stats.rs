@@ -3,10 +3,16 @@
 use node::Rejects;
 use proto::{BlockedReason, NodeId, StatsReport};
 
+use crate::spool::SpoolCounts;
 use crate::worker::Progress;
 
 /// The report for `progress`: throughput, weights and their lag, the barrier, what it waits on.
-pub(crate) fn report(node: NodeId, progress: &Progress, rejects: &Rejects) -> StatsReport {
+pub(crate) fn report(
+    node: NodeId,
+    progress: &Progress,
+    rejects: &Rejects,
+    spool: Option<SpoolCounts>,
+) -> StatsReport {
     let mut r = StatsReport::new(node, node::unix_ms());
     let p = progress;
     r.push_metric("executor/env_steps", p.env_steps as f64);
@@ -33,6 +39,15 @@ pub(crate) fn report(node: NodeId, progress: &Progress, rejects: &Rejects) -> St
     }
     if let Some(step) = p.step {
         r.push_metric("executor/learner_step_seen", step.learner_step as f64);
+    }
+    if let Some(c) = spool {
+        r.push_metric("executor/spool_held_batches", c.held_batches as f64);
+        r.push_metric("executor/spool_held_bytes", c.held_bytes as f64);
+        r.push_metric("executor/spool_produced_transitions", c.produced_transitions as f64);
+        r.push_metric("executor/spool_durable_batches", c.durable_batches as f64);
+        r.push_metric("executor/spool_resent_batches", c.resent_batches as f64);
+        r.push_metric("executor/spool_overflow_batches", c.overflow_batches as f64);
+        r.push_metric("executor/spool_invalid_batches", c.invalid_batches as f64);
     }
     if let Some(w) = &p.waiting {
         r.blocked.push(BlockedReason { what: w.wait.what().into(), why: w.wait.why(), since_ms: w.since_ms });

@@ -249,6 +249,7 @@ fn evaluation_thread(
                     mode = mode_name,
                     mean_return,
                     std_return,
+                    goal_success = e.goal_success,
                     "evaluation"
                 );
                 let report = EvalReport {
@@ -259,6 +260,7 @@ fn evaluation_thread(
                     mean_length: e.mean_length,
                     std_return: e.std_return,
                     mode,
+                    goal_success: e.goal_success,
                 };
                 if out.blocking_send(Out::Eval(report)).is_err() {
                     return;

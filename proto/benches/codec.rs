@@ -40,6 +40,7 @@ fn transitions(n: usize, obs_dim: u32, act_dim: u32) -> Transitions {
 fn ant_experience(n: usize) -> ExperienceBatch {
     ExperienceBatch {
         executor_id: 0,
+        stream: 0,
         seq: 1,
         weights_version: 1000,
         env_steps: 128_000,

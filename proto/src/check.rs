@@ -72,6 +72,14 @@ pub(crate) fn finite_f64(field: &'static str, value: f64) -> Result<(), Validati
     Ok(())
 }
 
+/// A fraction, when present, lies in [0, 1] (NaN does not).
+pub(crate) fn fraction(field: &'static str, value: Option<f64>) -> Result<(), ValidationError> {
+    match value {
+        Some(value) if !(0.0..=1.0).contains(&value) => Err(ValidationError::NotAFraction { field, value }),
+        _ => Ok(()),
+    }
+}
+
 /// A scalar is non-zero.
 pub(crate) fn positive(field: &'static str, value: u64) -> Result<(), ValidationError> {
     if value == 0 {

@@ -24,7 +24,7 @@ use crate::error::{DecodeError, ValidationError};
 /// First two bytes of every frame.
 pub const MAGIC: [u8; 2] = *b"SL";
 /// Wire format version; bump on any change to the frame or to any message's fields.
-pub const FORMAT_VERSION: u16 = 3;
+pub const FORMAT_VERSION: u16 = 4;
 /// Bytes before the payload.
 pub const HEADER_LEN: usize = 13;
 /// Largest payload accepted, and the bincode allocation limit while parsing one.
@@ -67,11 +67,13 @@ pub enum MessageKind {
     EvalReport = 11,
     /// [`crate::FrozenLevels`].
     FrozenLevels = 12,
+    /// [`crate::DurableMarks`].
+    DurableMarks = 13,
 }
 
 impl MessageKind {
     /// Every kind, in wire-byte order.
-    pub const ALL: [MessageKind; 12] = [
+    pub const ALL: [MessageKind; 13] = [
         MessageKind::ExperienceBatch,
         MessageKind::SampleRequest,
         MessageKind::SampleReply,
@@ -84,6 +86,7 @@ impl MessageKind {
         MessageKind::LearnerStep,
         MessageKind::EvalReport,
         MessageKind::FrozenLevels,
+        MessageKind::DurableMarks,
     ];
 
     /// The kind with this wire byte, if any.
@@ -247,7 +250,7 @@ mod tests {
             assert_eq!(MessageKind::from_u8(kind as u8), Some(kind));
         }
         assert_eq!(MessageKind::from_u8(0), None);
-        assert_eq!(MessageKind::from_u8(13), None);
+        assert_eq!(MessageKind::from_u8(14), None);
     }
 
     #[test]

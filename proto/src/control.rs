@@ -152,6 +152,8 @@ pub struct EvalReport {
     pub std_return: f64,
     /// How the latent was chosen.
     pub mode: EvalMode,
+    /// With HER: the fraction of episodes that reached their goal at some step; in [0, 1].
+    pub goal_success: Option<f64>,
 }
 
 impl Sealed for EvalReport {}
@@ -163,7 +165,8 @@ impl Message for EvalReport {
         check::positive("episodes", u64::from(self.episodes))?;
         check::finite_f64("mean_return", self.mean_return)?;
         check::finite_f64("std_return", self.std_return)?;
-        check::finite_f64("mean_length", self.mean_length)
+        check::finite_f64("mean_length", self.mean_length)?;
+        check::fraction("goal_success", self.goal_success)
     }
 }
 

@@ -91,7 +91,9 @@ impl DecodeError {
                 ValidationError::LengthMismatch { .. } => "length",
                 ValidationError::Empty { .. } => "empty",
                 ValidationError::TooLarge { .. } => "too_large",
-                ValidationError::Zero { .. } | ValidationError::BadText { .. } => "invalid",
+                ValidationError::Zero { .. }
+                | ValidationError::BadText { .. }
+                | ValidationError::NotAFraction { .. } => "invalid",
             },
         }
     }
@@ -125,6 +127,14 @@ pub enum ValidationError {
         field: &'static str,
         /// Index of the first negative element.
         index: usize,
+    },
+    /// A fraction (a success rate) is not within [0, 1].
+    #[error("{field} = {value} is not a fraction in [0, 1]")]
+    NotAFraction {
+        /// The offending field.
+        field: &'static str,
+        /// Value present.
+        value: f64,
     },
     /// A dimension is zero or larger than [`crate::MAX_DIM`].
     #[error("{field} = {value} is outside 1..={max}")]

@@ -147,7 +147,11 @@ impl Transitions {
 pub struct ExperienceBatch {
     /// The sending executor.
     pub executor_id: u32,
-    /// Per-executor batch sequence number, starting at 0; a gap means batches were lost.
+    /// The sending process's stream: a nonzero id drawn at its start, so that (`executor_id`,
+    /// `stream`, `seq`) names one batch across restarts and re-sends, and the replay server stores
+    /// each at most once (see [`crate::DurableMarks`]). 0: a sender without a spool; not deduplicated.
+    pub stream: u64,
+    /// Batch sequence number within the stream, starting at 0; a gap means batches were lost.
     pub seq: u64,
     /// Version of the weights that chose these actions (policy lag = learner's step − this).
     pub weights_version: u64,
@@ -280,6 +284,7 @@ mod tests {
         assert_eq!(nan.validate(), Err(ValidationError::NonFinite { field: "actions", index: 1 }));
         let batch = ExperienceBatch {
             executor_id: 0,
+            stream: 0,
             seq: 0,
             weights_version: 0,
             env_steps: 1,

@@ -10,6 +10,7 @@
 //! | `experience/<executor_id>`       | [`ExperienceBatch`]                   | executor               | replay server (`experience/*`)    |
 //! | `replay/sample` (queryable)      | [`SampleRequest`] → [`SampleReply`]   | learner queries        | replay server replies             |
 //! | `replay/priorities`              | [`PriorityUpdate`]                    | learner                | replay server                     |
+//! | `replay/durable`                 | [`DurableMarks`]                      | replay server          | executors (spools)                |
 //! | `params/publish`                 | [`WeightsSnapshot`]                   | learner                | param server                      |
 //! | `params/weights` (+ queryable)   | [`WeightsSnapshot`]                   | param server           | executors                         |
 //! | `params/frozen` (queryable)      | [`FrozenLevels`] (hierarchies only)   | param server replies   | executors query once              |
@@ -26,7 +27,8 @@
 //! - [`codec`]: [`encode`]/[`decode`], the frame (magic, version, kind, length, CRC32, bincode 2
 //!   payload) and the [`Message`] trait every wire type implements.
 //! - [`topics`]: [`RunId`], [`Role`], [`Topic`] (key ⇄ topic) and the key builders and wildcards.
-//! - [`experience`], [`sampling`], [`params`], [`control`], [`stats`]: one message family each.
+//! - [`experience`], [`durable`], [`sampling`], [`params`], [`control`], [`stats`]: one message
+//!   family each.
 //! - [`error`]: [`DecodeError`], [`ValidationError`], [`TopicError`].
 //!
 //! Bulk data is `f32`, stored as flat row-major `Vec<f32>` columns and written as one byte string each.
@@ -58,6 +60,7 @@ mod blob;
 mod check;
 pub mod codec;
 pub mod control;
+pub mod durable;
 pub mod error;
 pub mod experience;
 pub mod params;
@@ -68,6 +71,7 @@ pub mod topics;
 pub use check::{MAX_BATCH_LEN, MAX_DIM, MAX_NAME_LEN, MAX_STATS_ENTRIES, MAX_TEXT_LEN};
 pub use codec::{FORMAT_VERSION, Message, MessageKind, decode, encode, peek_kind};
 pub use control::{BarrierReport, EvalMode, EvalReport, GlobalStep, LearnerStep};
+pub use durable::{DurableMarks, MAX_STREAM_MARKS, StreamMark};
 pub use error::{DecodeError, Result, TopicError, ValidationError};
 pub use experience::{ExperienceBatch, Transition, Transitions};
 pub use params::{ContentHash, FrozenLevel, FrozenLevels, MAX_FROZEN_LEVELS, WeightsSnapshot};

@@ -123,6 +123,8 @@ pub enum Topic {
     ReplaySample,
     /// `replay/priorities`: [`crate::PriorityUpdate`], learner → replay server.
     ReplayPriorities,
+    /// `replay/durable`: [`crate::DurableMarks`], replay server → executors.
+    ReplayDurable,
     /// `params/weights`: [`crate::WeightsSnapshot`] from the param server, and its latest-value queryable.
     ParamsWeights,
     /// `params/publish`: [`crate::WeightsSnapshot`], learner → param server.
@@ -158,6 +160,7 @@ impl Topic {
             Topic::Experience { executor_id } => format!("experience/{executor_id}"),
             Topic::ReplaySample => "replay/sample".to_string(),
             Topic::ReplayPriorities => "replay/priorities".to_string(),
+            Topic::ReplayDurable => "replay/durable".to_string(),
             Topic::ParamsWeights => "params/weights".to_string(),
             Topic::ParamsPublish => "params/publish".to_string(),
             Topic::ParamsFrozen => "params/frozen".to_string(),
@@ -181,6 +184,7 @@ impl Topic {
             ["experience", id] => Topic::Experience { executor_id: parse_id(id)? },
             ["replay", "sample"] => Topic::ReplaySample,
             ["replay", "priorities"] => Topic::ReplayPriorities,
+            ["replay", "durable"] => Topic::ReplayDurable,
             ["params", "weights"] => Topic::ParamsWeights,
             ["params", "publish"] => Topic::ParamsPublish,
             ["params", "frozen"] => Topic::ParamsFrozen,
@@ -238,6 +242,11 @@ pub fn replay_sample(run: &RunId) -> String {
 /// `rl/<run>/replay/priorities`: priority updates from the learner.
 pub fn replay_priorities(run: &RunId) -> String {
     Topic::ReplayPriorities.key(run)
+}
+
+/// `rl/<run>/replay/durable`: the replay server's durable marks for executors' spools.
+pub fn replay_durable(run: &RunId) -> String {
+    Topic::ReplayDurable.key(run)
 }
 
 /// `rl/<run>/params/weights`: the param server's broadcast and latest-snapshot queryable.
@@ -372,6 +381,7 @@ mod tests {
             Topic::Experience { executor_id: u32::MAX },
             Topic::ReplaySample,
             Topic::ReplayPriorities,
+            Topic::ReplayDurable,
             Topic::ParamsWeights,
             Topic::ParamsPublish,
             Topic::ParamsFrozen,

@@ -45,6 +45,7 @@ fn transitions(n: usize, obs_dim: u32, act_dim: u32) -> Transitions {
 fn experience(n: usize, obs_dim: u32, act_dim: u32) -> ExperienceBatch {
     ExperienceBatch {
         executor_id: 3,
+        stream: 0,
         seq: 41,
         weights_version: 12_000,
         env_steps: 1_234_567,
@@ -249,9 +250,14 @@ fn control_messages() {
         mean_length: 1000.0,
         std_return: 0.0,
         mode: proto::EvalMode::ZeroLatent,
+        goal_success: None,
     };
     check_message(&eval, 1);
+    check_message(&EvalReport { goal_success: Some(0.25), ..eval }, 1);
     assert!(EvalReport { mean_return: f64::NAN, ..eval }.validate().is_err());
+    for bad in [-0.1, 1.5, f64::NAN] {
+        assert!(EvalReport { goal_success: Some(bad), ..eval }.validate().is_err(), "{bad}");
+    }
     let barrier = BarrierReport {
         executor_id: 2,
         env_steps: 50_000,

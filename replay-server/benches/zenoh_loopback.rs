@@ -136,6 +136,7 @@ fn payloads() -> Vec<ZBytes> {
             let states: Vec<f32> = (0..(n + 1) * OBS as usize).map(|_| rng.random()).collect();
             let batch = ExperienceBatch {
                 executor_id: 0,
+                stream: 0,
                 seq,
                 weights_version: 0,
                 env_steps: 0,

@@ -9,6 +9,7 @@
 //! | `experience/*`          | in        | `ExperienceBatch` (subscriber)                     |
 //! | `replay/sample`         | queryable | `SampleRequest` → `SampleReply` (batch or refusal)  |
 //! | `replay/priorities`     | in        | `PriorityUpdate` (subscriber)                      |
+//! | `replay/durable`        | out       | `DurableMarks` every `stats_interval_ms` once a snapshot is durable |
 //! | `replay/state` (`?k=N`) | queryable | → `StatsReport` with `replay/top.<rank>.*` metrics  |
 //! | `stats/replay/<id>`     | out       | `StatsReport` every `stats_interval_ms`             |
 //! | `liveliness/replay/<id>`| token     | declared once every input is declared (readiness)  |
@@ -27,6 +28,7 @@
 //! | `pending.rs`  | blocked sample requests with deadlines (sans-IO)                              |
 //! | `replica.rs`  | the snapshot replica: a second buffer fed the same operations, on a thread    |
 //! | `snapshot.rs` | the snapshot file (server sidecar + buffer), atomic write, restore            |
+//! | `streams.rs`  | [`Streams`]: decided batches per executor stream (re-send dedupe, durable marks) |
 //! | `scan.rs`     | priority min/max/mean, ESS and top-k in chunks (short lock holds)             |
 //! | `stats.rs`    | the `StatsReport`                                                             |
 //! | `server.rs`   | the zenoh shell: declarations, insert/priority tasks, stats and snapshot timers |
@@ -57,6 +59,7 @@ mod server;
 mod service;
 mod snapshot;
 mod stats;
+mod streams;
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -74,6 +77,7 @@ pub use replica::SnapshotLog;
 pub use scan::{CHUNK as SCAN_CHUNK_TRANSITIONS, PriorityDigest, PriorityScan};
 pub use service::{SampleOutcome, Service, ServiceCounters, Waiting};
 pub use snapshot::{SERVER_SNAPSHOT_MAGIC, SERVER_SNAPSHOT_VERSION, Sidecar, SnapshotFileError, read_file};
+pub use streams::Streams;
 
 use crate::replica::Replica;
 use crate::server::Ctx;
@@ -117,6 +121,8 @@ pub struct Report {
     pub rejected: BTreeMap<String, u64>,
     /// Snapshots.
     pub snapshots: SnapshotReport,
+    /// Decided batches per executor stream at shutdown.
+    pub streams: Streams,
 }
 
 /// Runs the replay server until `shutdown` fires, then writes the final snapshot (if configured).
@@ -125,6 +131,7 @@ pub async fn run(config: ReplayServerConfig, bus: Bus, mut shutdown: Shutdown) -
     let started = Instant::now();
     let restored = restore(&config).await?;
     let restored_sequence = restored.as_ref().map(|(_, sidecar)| sidecar.sequence);
+    let restored_marks = restored.as_ref().map(|(_, sidecar)| sidecar.durable_marks());
     let (buffer, sidecar) = match restored {
         Some((buffer, sidecar)) => (buffer, Some(sidecar)),
         None => (ReplayBuffer::new(config.buffer.clone(), config.dims())?, None),
@@ -160,6 +167,7 @@ pub async fn run(config: ReplayServerConfig, bus: Bus, mut shutdown: Shutdown) -
         "replay-server starting"
     );
     let ctx = Arc::new(Ctx::new(service, bus.clone(), config.clone()));
+    ctx.set_durable(restored_marks);
     let tasks = server::start(&ctx, &shutdown).await?;
     // Declared last: a client that sees the token finds every input in place.
     let alive = bus.announce().await?;
@@ -174,11 +182,14 @@ pub async fn run(config: ReplayServerConfig, bus: Bus, mut shutdown: Shutdown) -
         (snapshots.written, snapshots.failed, snapshots.aborted) = (log.written, log.failed, log.aborted);
     }
     if let Some(path) = config.snapshot_path.clone() {
-        let ctx = Arc::clone(&ctx);
-        match tokio::task::spawn_blocking(move || write_final(&ctx, path)).await? {
-            Ok(sequence) => {
+        let writing = Arc::clone(&ctx);
+        match tokio::task::spawn_blocking(move || write_final(&writing, path)).await? {
+            Ok(marks) => {
                 snapshots.written += 1;
-                snapshots.final_sequence = Some(sequence);
+                snapshots.final_sequence = Some(marks.snapshot_sequence);
+                // Executors still up drop what this last snapshot holds from their spools.
+                ctx.set_durable(Some(marks));
+                ctx.publish_durable().await;
             }
             Err(e) => {
                 snapshots.failed += 1;
@@ -201,6 +212,7 @@ pub async fn run(config: ReplayServerConfig, bus: Bus, mut shutdown: Shutdown) -
             counters: service.counters().clone(),
             rejected: service.rejects().counts().clone(),
             snapshots,
+            streams: service.streams().clone(),
         }
     };
     drop(ctx);
@@ -229,13 +241,14 @@ async fn restore(config: &ReplayServerConfig) -> anyhow::Result<Option<(ReplayBu
     Ok(restored)
 }
 
-/// Writes the shutdown snapshot from the service's own buffer (every task has stopped).
-fn write_final(ctx: &Ctx, path: std::path::PathBuf) -> Result<u64, SnapshotFileError> {
+/// Writes the shutdown snapshot from the service's own buffer (every task has stopped); returns
+/// what it made durable.
+fn write_final(ctx: &Ctx, path: std::path::PathBuf) -> Result<proto::DurableMarks, SnapshotFileError> {
     let mut service = ctx.lock();
     let sidecar = service.next_sidecar(node::unix_ms());
     let mut writer = FileWriter::new(path);
     let times = writer.write(service.buffer(), &sidecar, &AtomicBool::new(false), |_| {})?;
     writer.finish()?;
     tracing::info!(sequence = sidecar.sequence, bytes = times.bytes, "final snapshot written");
-    Ok(sidecar.sequence)
+    Ok(sidecar.durable_marks())
 }

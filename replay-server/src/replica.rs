@@ -89,6 +89,8 @@ pub struct SnapshotLog {
     pub last_bytes: u64,
     /// The last error, if the last attempt failed.
     pub last_error: Option<String>,
+    /// What the last durable snapshot made durable.
+    pub durable: Option<proto::DurableMarks>,
 }
 
 /// State shared between the service side and the replica thread.
@@ -221,6 +223,7 @@ fn write(buffer: &ReplayBuffer, sidecar: &Sidecar, shared: &Arc<Shared>, writer:
     shared.abort.store(false, Ordering::Relaxed);
     shared.writing.store(true, Ordering::Relaxed);
     let sequence = sidecar.sequence;
+    let marks = sidecar.durable_marks();
     let on_durable = {
         let shared = Arc::clone(shared);
         move |published: &std::io::Result<()>| {
@@ -230,6 +233,7 @@ fn write(buffer: &ReplayBuffer, sidecar: &Sidecar, shared: &Arc<Shared>, writer:
                     log.written += 1;
                     log.last_sequence = sequence;
                     log.last_error = None;
+                    log.durable = Some(marks);
                 }
                 Err(e) => {
                     log.failed += 1;

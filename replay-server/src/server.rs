@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, anyhow};
 use node::{Bus, Shutdown, unix_ms};
-use proto::{ExperienceBatch, PriorityUpdate, StatsReport, topics};
+use proto::{DurableMarks, ExperienceBatch, PriorityUpdate, StatsReport, topics};
 use tokio::sync::Notify;
 use tokio::task::JoinSet;
 use zenoh::handlers::{FifoChannel, FifoChannelHandler};
@@ -38,6 +38,8 @@ pub(crate) struct Ctx {
     pub snapshot_pause_max_us: AtomicU64,
     /// Every snapshot request's hold, µs (one per snapshot interval, capped).
     pub snapshot_pauses_us: Mutex<Vec<u64>>,
+    /// What the newest durable snapshot (restored or written) made durable, for executors' spools.
+    pub durable: Mutex<Option<DurableMarks>>,
 }
 
 impl Ctx {
@@ -51,6 +53,26 @@ impl Ctx {
             insert_rate: AtomicU64::new(0),
             snapshot_pause_max_us: AtomicU64::new(0),
             snapshot_pauses_us: Mutex::new(Vec::new()),
+            durable: Mutex::new(None),
+        }
+    }
+
+    /// Takes `marks` as the newest durable ones unless newer are held.
+    pub fn set_durable(&self, marks: Option<DurableMarks>) {
+        let mut held = self.durable.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(marks) = marks
+            && held.as_ref().is_none_or(|h| h.snapshot_sequence < marks.snapshot_sequence)
+        {
+            *held = Some(marks);
+        }
+    }
+
+    /// Publishes the newest durable marks, if any snapshot is durable yet.
+    pub async fn publish_durable(&self) {
+        let marks = self.durable.lock().unwrap_or_else(PoisonError::into_inner).clone();
+        let Some(marks) = marks else { return };
+        if let Err(e) = self.bus.put(&topics::replay_durable(self.bus.run()), &marks).await {
+            tracing::warn!(error = %e, "could not publish the durable marks");
         }
     }
 
@@ -220,6 +242,7 @@ async fn stats_loop(ctx: Arc<Ctx>, mut shutdown: Shutdown) -> anyhow::Result<()>
             _ = ticks.tick() => {}
         }
         let report = scan(&ctx, 0, |service, digest| {
+            ctx.set_durable(service.replica().and_then(|r| r.log().durable));
             let rates = meter.rates(service.counters(), Instant::now());
             ctx.insert_rate.store(rates.inserts_per_s.to_bits(), Ordering::Relaxed);
             let mut report = ctx.report(service, rates, digest.as_ref());
@@ -231,6 +254,9 @@ async fn stats_loop(ctx: Arc<Ctx>, mut shutdown: Shutdown) -> anyhow::Result<()>
         if let Err(e) = ctx.bus.put(&key, &report).await {
             tracing::warn!(error = %e, "could not publish stats");
         }
+        // Every interval, not only when a snapshot lands: a restarted executor learns the marks
+        // of its earlier streams within one interval.
+        ctx.publish_durable().await;
     }
     Ok(())
 }

@@ -19,6 +19,7 @@ use crate::limiter::{Blocked, RateLimiter, Resumed};
 use crate::rejects::{Input, Rejection, Rejects};
 use crate::replica::{Op, ReplicaLink};
 use crate::snapshot::Sidecar;
+use crate::streams::Streams;
 
 /// What the server has done since its first start (restored with snapshots).
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -41,6 +42,10 @@ pub struct ServiceCounters {
     pub refused: BTreeMap<String, u64>,
     /// Milliseconds sample requests spent blocked, by reason.
     pub blocked_ms: BTreeMap<String, u64>,
+    /// Re-sent experience batches recognised and not stored again (their stream had them decided).
+    pub duplicate_batches: u64,
+    /// Transitions in those.
+    pub duplicate_transitions: u64,
 }
 
 /// What blocked sample requests are waiting for right now (for the stats topic).
@@ -86,6 +91,8 @@ pub struct Service {
     rejects: Rejects,
     limits: Limits,
     replica: Option<ReplicaLink>,
+    /// Decided batches per executor stream (dedupe of re-sends; saved with snapshots).
+    streams: Streams,
     sequence: u64,
     waiting: Option<Waiting>,
     insert_wait: Option<Waiting>,
@@ -132,9 +139,9 @@ impl Service {
         let size = buffer.len() as u64;
         let saved = sidecar.as_ref().map(|s| (s.limiter_config, s.limiter));
         let (limiter, resumed) = RateLimiter::resume(cfg.limiter(), saved, size);
-        let (counters, rejects, sequence) = match sidecar {
-            Some(s) => (s.counters, Rejects::from_counts(s.rejected), s.sequence),
-            None => (ServiceCounters::default(), Rejects::default(), 0),
+        let (counters, rejects, streams, sequence) = match sidecar {
+            Some(s) => (s.counters, Rejects::from_counts(s.rejected), s.streams, s.sequence),
+            None => (ServiceCounters::default(), Rejects::default(), Streams::default(), 0),
         };
         let limits = Limits {
             obs_dim: cfg.obs_dim,
@@ -152,6 +159,7 @@ impl Service {
             rejects,
             limits,
             replica: None,
+            streams,
             sequence,
             waiting: None,
             insert_wait: None,
@@ -195,6 +203,11 @@ impl Service {
         &self.rejects
     }
 
+    /// Decided batches per executor stream.
+    pub fn streams(&self) -> &Streams {
+        &self.streams
+    }
+
     /// Number of the last snapshot requested (or restored).
     pub fn snapshot_sequence(&self) -> u64 {
         self.sequence
@@ -221,13 +234,31 @@ impl Service {
         self.accept_experience(proto::decode(payload), now)
     }
 
-    /// Inserts a decoded experience batch (decoding happens outside the lock in the server).
+    /// Inserts a decoded experience batch (decoding happens outside the lock in the server). A batch
+    /// of a stream (nonzero `stream`) is decided once: stored or refused, and recorded either way,
+    /// so that a re-send of it is recognised (counted as a duplicate, `Ok(0)`) and not stored twice.
     pub fn accept_experience(
         &mut self,
         decoded: Result<ExperienceBatch, DecodeError>,
         now: Instant,
     ) -> Result<u64, Rejection> {
         let batch = decoded.map_err(|e| self.rejected(Rejection::decode(Input::Experience, &e), now))?;
+        let (executor, stream, seq) = (batch.executor_id, batch.stream, batch.seq);
+        if stream == 0 {
+            return self.insert_checked(batch, now);
+        }
+        if self.streams.seen(executor, stream, seq) {
+            self.counters.duplicate_batches += 1;
+            self.counters.duplicate_transitions += batch.len() as u64;
+            return Ok(0);
+        }
+        let decided = self.insert_checked(batch, now);
+        self.streams.record(executor, stream, seq);
+        decided
+    }
+
+    /// Checks a decoded batch against the task and limits, and inserts it.
+    fn insert_checked(&mut self, batch: ExperienceBatch, now: Instant) -> Result<u64, Rejection> {
         let t = &batch.transitions;
         if (t.obs_dim, t.act_dim) != (self.limits.obs_dim, self.limits.act_dim) {
             let detail = format!(
@@ -396,6 +427,7 @@ impl Service {
             limiter_config: self.limiter.config(),
             limiter: self.limiter.counters(),
             seed: self.limits.seed,
+            streams: self.streams.clone(),
         }
     }
 

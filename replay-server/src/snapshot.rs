@@ -30,11 +30,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::limiter::{LimiterConfig, LimiterCounters};
 use crate::service::ServiceCounters;
+use crate::streams::Streams;
 
 /// First bytes of a server snapshot.
 pub const SERVER_SNAPSHOT_MAGIC: [u8; 8] = *b"RLRSERVE";
 /// Format version of the server part; the buffer part carries `replay::SNAPSHOT_VERSION`.
-pub const SERVER_SNAPSHOT_VERSION: u32 = 1;
+pub const SERVER_SNAPSHOT_VERSION: u32 = 2;
 /// Largest sidecar read back: it holds counters and rejection reasons, a few KiB at most.
 const MAX_SIDECAR_BYTES: u32 = 1 << 20;
 
@@ -55,6 +56,16 @@ pub struct Sidecar {
     pub limiter: LimiterCounters,
     /// The sampling seed in use (informational: the configured seed wins on restore).
     pub seed: u64,
+    /// Decided batches per executor stream, as of the buffer saved with this sidecar: what the
+    /// snapshot makes durable ([`proto::DurableMarks`]).
+    pub streams: Streams,
+}
+
+impl Sidecar {
+    /// What this snapshot makes durable, once it is.
+    pub fn durable_marks(&self) -> proto::DurableMarks {
+        proto::DurableMarks { snapshot_sequence: self.sequence, marks: self.streams.marks() }
+    }
 }
 
 /// Why a snapshot could not be written or read.
@@ -282,6 +293,11 @@ mod tests {
             },
             limiter: LimiterCounters { inserted: 2, sampled: 0, uncredited: 1 },
             seed: 9,
+            streams: {
+                let mut streams = Streams::default();
+                streams.record(3, 77, 0);
+                streams
+            },
         }
     }
 
@@ -296,7 +312,7 @@ mod tests {
         bad[0] = b'X';
         assert!(matches!(read_from(&mut &bad[..], cfg(), DIMS), Err(SnapshotFileError::BadMagic)));
         let mut bad = bytes.clone();
-        bad[8] = 2;
+        bad[8] = 1; // the format before streams were saved
         assert!(matches!(
             read_from(&mut &bad[..], cfg(), DIMS),
             Err(SnapshotFileError::UnsupportedVersion { .. })

@@ -93,6 +93,9 @@ pub fn build(service: &Service, inputs: &ReportInputs<'_>) -> StatsReport {
     metric("priority_updates_applied_total", c.priorities_applied as f64);
     metric("priority_updates_stale_total", c.priorities_stale as f64);
     metric("evicted_early_total", buffer.counters().evicted_early as f64);
+    metric("duplicate_batches_total", c.duplicate_batches as f64);
+    metric("duplicate_transitions_total", c.duplicate_transitions as f64);
+    metric("streams", service.streams().len() as f64);
     let r = inputs.rates;
     metric("inserts_per_s", r.inserts_per_s);
     metric("insert_messages_per_s", r.insert_messages_per_s);

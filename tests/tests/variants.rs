@@ -5,14 +5,24 @@
 use std::time::Duration;
 
 use cluster::{Cluster, Spec, within};
-use proto::{ExperienceBatch, topics};
+use proto::{EvalReport, ExperienceBatch, topics};
 
-/// Runs the tiny cluster with `config`, to `updates` learner updates, and checks nobody refused
-/// anything; returns the experience executor 0 published.
-async fn train(run_id: &str, config: String, updates: u64) -> anyhow::Result<Vec<ExperienceBatch>> {
+/// What a short run published.
+struct Trained {
+    /// Executor 0's experience.
+    experience: Vec<ExperienceBatch>,
+    /// The learner's evaluations (the tiny run file evaluates every 100 updates).
+    evals: Vec<EvalReport>,
+}
+
+/// Runs the tiny cluster with `config`, to `updates` learner updates and at least one evaluation,
+/// and checks nobody refused anything.
+async fn train(run_id: &str, config: String, updates: u64) -> anyhow::Result<Trained> {
     let cluster = Cluster::start(Spec { run_id: run_id.into(), executors: 1, config }).await?;
     let experience = cluster.collect::<ExperienceBatch>(&topics::experience(cluster.run(), 0)).await?;
+    let evals = cluster.collect::<EvalReport>(&topics::evaluation(cluster.run())).await?;
     let step = cluster.wait_for_learner_step(updates).await?;
+    evals.wait_until("an evaluation", |e| !e.is_empty()).await?;
     let stopped = within("the cluster to stop", Duration::from_secs(60), cluster.stop()).await??;
     assert!(stopped.learner.updater.final_step >= step);
     assert_eq!(stopped.learner.updater.non_finite_updates, 0);
@@ -22,7 +32,7 @@ async fn train(run_id: &str, config: String, updates: u64) -> anyhow::Result<Vec
         assert!(executor.rejected.is_empty(), "executor {id}: {:?}", executor.rejected);
         assert!(executor.worker.weights_loads >= 2, "executor {id} loaded new weights");
     }
-    Ok(experience.snapshot())
+    Ok(Trained { experience: experience.snapshot(), evals: evals.snapshot() })
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
@@ -34,8 +44,9 @@ async fn categorical_critics_train_over_the_bus() -> anyhow::Result<()> {
                 "[agent]\ncritic = \"categorical\"\ncategorical = {{ variant = \"{variant}\", atoms = 11 }}\n"
             ),
         );
-        let batches = train(&format!("categorical-{variant}"), config, 150).await?;
-        assert!(batches.iter().all(|b| b.td_errors.iter().all(|d| d.is_finite())));
+        let trained = train(&format!("categorical-{variant}"), config, 150).await?;
+        assert!(trained.evals.iter().all(|e| e.goal_success.is_none()));
+        assert!(trained.experience.iter().all(|b| b.td_errors.iter().all(|d| d.is_finite())));
     }
     Ok(())
 }
@@ -48,7 +59,10 @@ async fn her_executors_publish_goal_conditioned_and_relabelled_experience() -> a
         // Wider rows: the in-flight message bound grows with them.
         .replace("memory_budget_bytes = 268435456", "memory_budget_bytes = 536870912")
         + "\n[her]\ngoal = \"speed\"\nreward = \"binary\"\n";
-    let batches = train("her-speed", config, 150).await?;
+    let trained = train("her-speed", config, 150).await?;
+    // Evaluations report the goal success rate beside the task's own return.
+    assert!(trained.evals.iter().all(|e| e.goal_success.is_some_and(|s| (0.0..=1.0).contains(&s))));
+    let batches = trained.experience;
     let rewards: Vec<f32> = batches.iter().flat_map(|b| b.transitions.rewards.clone()).collect();
     assert!(batches.iter().all(|b| b.transitions.obs_dim == 119));
     // Binary goal rewards only, and relabelled goals (achieved later in the episode) are reached.

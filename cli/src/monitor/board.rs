@@ -2,7 +2,8 @@
 //! scalars, at the run's total env steps (the x axis of an RL learning curve; TensorBoard's "wall"
 //! and "relative" views give the time axis).
 //!
-//! - `eval/<mode>/return_mean`, `return_std`, `length_mean`, `learner_step`: every evaluation;
+//! - `eval/<mode>/return_mean`, `return_std`, `length_mean`, `learner_step` (and `goal_success`
+//!   with HER): every evaluation;
 //! - `train/episode_return`, `train/episode_length`: every finished executor episode;
 //! - `run/...`: the tick's run-wide figures (updates/s, env steps/s, replay size, learner step);
 //! - every metric of every process's latest stats under its own name (`learner/q_loss`,
@@ -113,12 +114,14 @@ pub fn episode_scalars(episode: &EpisodeRecord) -> Vec<Scalar> {
 pub fn eval_scalars(record: &EvalRecord) -> Vec<Scalar> {
     let eval = &record.eval;
     let mode = eval.mode.name();
-    vec![
+    let mut scalars = vec![
         Scalar::new(format!("eval/{mode}/return_mean"), eval.mean_return),
         Scalar::new(format!("eval/{mode}/return_std"), eval.std_return),
         Scalar::new(format!("eval/{mode}/length_mean"), eval.mean_length),
         Scalar::new(format!("eval/{mode}/learner_step"), eval.learner_step as f64),
-    ]
+    ];
+    scalars.extend(eval.goal_success.map(|s| Scalar::new(format!("eval/{mode}/goal_success"), s)));
+    scalars
 }
 
 #[cfg(test)]
@@ -174,5 +177,16 @@ mod tests {
         );
         let eval: HashMap<&str, f32> = events[3].scalars.iter().map(|(t, v)| (t.as_str(), *v)).collect();
         assert_eq!(eval["eval/fixed_latent/return_mean"], 1111.25);
+        assert!(!eval.contains_key("eval/fixed_latent/goal_success"), "no goals, no success rate");
+    }
+
+    #[test]
+    fn a_her_evaluation_writes_its_goal_success() {
+        let mut state = MonitorState::new(fixtures::run());
+        let mut report: proto::EvalReport = proto::decode(&fixtures::eval(2, 50.0)).unwrap();
+        report.goal_success = Some(0.75);
+        let record = state.on_eval(at(1.0), &proto::encode(&report)).unwrap();
+        let scalars = eval_scalars(&record);
+        assert!(scalars.iter().any(|s| s.tag == "eval/fixed_latent/goal_success" && s.value == 0.75));
     }
 }

@@ -101,6 +101,7 @@ pub fn eval(epoch: u64, mean_return: f64) -> Vec<u8> {
         mean_length: 1000.0,
         std_return: 0.0,
         mode: proto::EvalMode::FixedLatent,
+        goal_success: None,
     })
 }
 

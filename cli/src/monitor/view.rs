@@ -89,12 +89,13 @@ fn write_screen(s: &mut String, state: &MonitorState, tick: &Tick) -> std::fmt::
     match state.last_eval() {
         Some(e) => writeln!(
             s,
-            "evaluation    epoch {} at learner step {}: mean return {} over {} episode(s), length {}",
+            "evaluation    epoch {} at learner step {}: mean return {} over {} episode(s), length {}{}",
             e.epoch,
             e.learner_step,
             num(Some(e.mean_return)),
             e.episodes,
             num(Some(e.mean_length)),
+            e.goal_success.map(|s| format!(", goal reached in {:.0}%", 100.0 * s)).unwrap_or_default(),
         )?,
         None => writeln!(s, "evaluation    (none yet)")?,
     }

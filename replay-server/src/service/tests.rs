@@ -46,7 +46,15 @@ fn batch(first: u32, n: u32) -> ExperienceBatch {
         .unwrap();
     }
     let td_errors = (0..n).map(|i| (first + i) as f32 / 10.0).collect();
-    ExperienceBatch { executor_id: 0, seq: 0, weights_version: 0, env_steps: 0, transitions: t, td_errors }
+    ExperienceBatch {
+        executor_id: 0,
+        stream: 0,
+        seq: 0,
+        weights_version: 0,
+        env_steps: 0,
+        transitions: t,
+        td_errors,
+    }
 }
 
 fn request(id: u64, batch_size: u32) -> SampleRequest {
@@ -300,4 +308,52 @@ fn max_rule_ignores_the_executors_td_errors() {
     s.handle_experience(&proto::encode(&batch(0, 16)), Instant::now()).unwrap();
     let stats = s.buffer().priority_stats().unwrap();
     assert_eq!((stats.min, stats.max), (1.0, 1.0), "an empty buffer's maximum is 1");
+}
+
+/// Batch `seq` of executor 0's stream 5, holding transitions `10 × seq ..`.
+fn streamed(seq: u64) -> ExperienceBatch {
+    ExperienceBatch { stream: 5, seq, ..batch(seq as u32 * 10, 4) }
+}
+
+#[test]
+fn a_streams_batches_are_stored_once_and_a_snapshot_makes_them_durable() {
+    let cfg = cfg();
+    let path = temp_path("durable");
+    let mut s = service(&cfg);
+    let replica_buffer = ReplayBuffer::new(cfg.buffer.clone(), cfg.dims()).unwrap();
+    let replica = Replica::start(replica_buffer, FileWriter::new(path.clone()), 1 << 20).unwrap();
+    s.attach_replica(replica.link());
+    let now = Instant::now();
+    let send = |s: &mut Service, seq| s.handle_experience(&proto::encode(&streamed(seq)), now).unwrap();
+    assert_eq!((send(&mut s, 0), send(&mut s, 1), send(&mut s, 0)), (4, 4, 0), "the re-send is recognised");
+    assert_eq!((s.counters().duplicate_batches, s.counters().duplicate_transitions), (1, 4));
+    assert_eq!(s.buffer().len(), 8);
+    assert!(s.request_snapshot(5));
+    send(&mut s, 2); // after the snapshot: not durable yet
+    let link = s.replica().unwrap().clone();
+    wait_until("the snapshot", || link.log().written == 1);
+    let durable = link.log().durable.unwrap();
+    assert_eq!(durable.durable_below(0, 5), Some(2));
+    drop(s.detach_replica());
+    replica.stop();
+
+    // Restarted from that snapshot, the executor re-sends all it still holds: 1 and 2.
+    let (buffer, sidecar) = snapshot::read_file(&path, cfg.buffer.clone(), cfg.dims()).unwrap().unwrap();
+    assert_eq!(sidecar.durable_marks(), durable);
+    let (mut restored, _) = Service::new(&cfg, buffer, Some(sidecar));
+    assert_eq!((send(&mut restored, 1), send(&mut restored, 2)), (0, 4));
+    assert_eq!(restored.buffer().len(), 12, "every batch once: 0, 1 from the snapshot, 2 re-sent");
+    assert_eq!(restored.streams().marks()[0].durable_below, 3);
+    std::fs::remove_dir_all(path.parent().unwrap()).unwrap();
+}
+
+#[test]
+fn unstreamed_batches_are_never_deduplicated() {
+    let mut s = service(&cfg());
+    let now = Instant::now();
+    for _ in 0..2 {
+        assert_eq!(s.handle_experience(&proto::encode(&batch(0, 4)), now).unwrap(), 4);
+    }
+    assert_eq!((s.buffer().len(), s.counters().duplicate_batches), (8, 0));
+    assert!(s.streams().is_empty());
 }

@@ -197,7 +197,15 @@ pub fn ant_batch(executor_id: u32, first: u32, n: u32) -> ExperienceBatch {
         .expect("row widths");
     }
     let td_errors = (first..first + n).map(|k| (k % 13) as f32 * 0.1).collect();
-    ExperienceBatch { executor_id, seq: 0, weights_version: 0, env_steps: 0, transitions: t, td_errors }
+    ExperienceBatch {
+        executor_id,
+        stream: 0,
+        seq: 0,
+        weights_version: 0,
+        env_steps: 0,
+        transitions: t,
+        td_errors,
+    }
 }
 
 /// Asserts each row of a sampled batch is transition `reward` of [`ant_batch`], within `inserted`.
