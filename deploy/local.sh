@@ -11,9 +11,18 @@
 # learner's update thread gets that core to itself and every other process and thread runs on the
 # rest, since the learner's updates/s decide the run; `none` = no pinning), BUILD=0 (skip `cargo build`).
 # Ctrl-C or TERM stops exactly this script's children, cleanly (each writes its report), within 30 s.
-# An executor that dies is restarted (a fresh process joins with the current weights; at most
-# EXECUTOR_RESTARTS times each, default 3) while the others go on; if the replay server, param
-# server, learner or monitor dies, the others are stopped and the script exits non-zero naming it.
+# Supervision: any role that dies is restarted from its own state while the others go on: the
+# learner from its newest checkpoint, the replay server from its snapshot (when the run file gives
+# [replay_server] snapshot_path, or DURABLE=1), the param server from the learner's re-sent weights
+# and the executors' reports, an executor as a fresh process that joins with the current weights
+# (and, with DURABLE=1, re-sends its spool), the monitor appending to its record. Restarts wait 1, 2,
+# 4 ... 30 s (doubling per restart of that role) and are capped at RESTARTS per role (default 5);
+# past the cap the run stops, exiting non-zero and naming the role. A learner that exits 0 has
+# reached max_updates: the run ends there. Every restart is a "local.sh: restart" line on stderr and in
+# runs/<run-id>/supervisor.log ("<unix time> restart <role> <count> <exit status>").
+# DURABLE=1: no produced transition is lost: the replay server snapshots to runs/<run-id>/replay.snap
+# (every [replay_server] snapshot_interval_s) and executors keep what it has not yet made durable in
+# runs/<run-id>/spool/ (see README "Durable experience").
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
@@ -36,6 +45,9 @@ hub="tcp/127.0.0.1:$port"
 common=(--run-id "$run_id" --config "$config")
 peer=(--connect "$hub" --listen tcp/127.0.0.1:0)
 export SACLSP_CHECKPOINT_DIR="$dir/checkpoints"
+if [[ ${DURABLE:-0} == 1 ]]; then
+    export SACLSP_REPLAY_SNAPSHOT="$dir/replay.snap" SACLSP_SPOOL_DIR="$dir/spool"
+fi
 
 # CPU placement: one core for the learner's update thread, the others for everything else.
 cores=$(nproc)
@@ -69,7 +81,7 @@ place_learner_threads() {
     echo "local.sh: the learner's update thread did not appear; not pinned" >&2
 }
 
-declare -A names=() restarts=()
+declare -A names=() restarts=() due=()
 pids=()
 start() { # name, command...
     local name=$1
@@ -78,8 +90,20 @@ start() { # name, command...
     pids+=($!)
     names[$!]=$name
 }
-start_executor() { # id
-    start "executor-$1" "${rest[@]}" nice -n "$nice_level" "$bin/executor" "${common[@]}" --id "$1" "${peer[@]}"
+# Starts role $1 (replay-server, param-server, learner, monitor or executor-<id>).
+launch() {
+    case $1 in
+        replay-server) start "$1" "${rest[@]}" "$bin/replay-server" "${common[@]}" --listen "$hub" ;;
+        param-server) start "$1" "${rest[@]}" "$bin/param-server" "${common[@]}" "${peer[@]}" ;;
+        learner)
+            start "$1" "${rest[@]}" "$bin/learner" "${common[@]}" "${peer[@]}"
+            place_learner_threads "${pids[-1]}"
+            ;;
+        monitor) start "$1" "${rest[@]}" "$bin/sac-lsp" monitor --run-id "$run_id" "${peer[@]}" --out "$dir/monitor.jsonl" ;;
+        executor-*)
+            start "$1" "${rest[@]}" nice -n "$nice_level" "$bin/executor" "${common[@]}" --id "${1#executor-}" "${peer[@]}"
+            ;;
+    esac
 }
 
 stopping=0
@@ -101,46 +125,51 @@ stop_all() {
 trap 'echo "local.sh: stopping $run_id" >&2; stop_all; exit 130' INT TERM
 
 echo "local.sh: run $run_id, $n executors, run file $config, logs in $dir/" >&2
-start replay-server "${rest[@]}" "$bin/replay-server" "${common[@]}" --listen "$hub"
-start param-server "${rest[@]}" "$bin/param-server" "${common[@]}" "${peer[@]}"
-start learner "${rest[@]}" "$bin/learner" "${common[@]}" "${peer[@]}"
-place_learner_threads "${pids[-1]}"
-for ((i = 0; i < n; i++)); do
-    start_executor "$i"
+for role in replay-server param-server learner $(seq -f 'executor-%g' 0 $((n - 1))) monitor; do
+    launch "$role"
 done
-start monitor "${rest[@]}" "$bin/sac-lsp" monitor --run-id "$run_id" "${peer[@]}" --out "$dir/monitor.jsonl"
 echo "local.sh: live view: $bin/sac-lsp monitor --run-id $run_id --connect $hub --out $dir/view.jsonl --no-tensorboard" >&2
 
 deadline=""
 [[ -n ${MINUTES:-} ]] && deadline=$(($(date +%s) + ${MINUTES%.*} * 60))
+max_restarts=${RESTARTS:-${EXECUTOR_RESTARTS:-5}}
 while true; do
+    now=$(date +%s)
+    for name in "${!due[@]}"; do
+        if [[ ${due[$name]} -le $now ]]; then
+            unset "due[$name]"
+            launch "$name"
+        fi
+    done
     for pid in "${pids[@]}"; do
-        if ! kill -0 "$pid" 2>/dev/null; then
-            status=0
-            wait "$pid" || status=$?
-            name=${names[$pid]}
-            echo "local.sh: $name (pid $pid) exited with status $status; see $dir/$name.log" >&2
-            if [[ $name == executor-* && $stopping == 0 ]]; then
-                id=${name#executor-}
-                restarts[$id]=$((${restarts[$id]:-0} + 1))
-                if [[ ${restarts[$id]} -le ${EXECUTOR_RESTARTS:-3} ]]; then
-                    echo "local.sh: restarting $name (restart ${restarts[$id]}); the others go on" >&2
-                    remaining=()
-                    for p in "${pids[@]}"; do [[ $p != "$pid" ]] && remaining+=("$p"); done
-                    pids=("${remaining[@]}")
-                    start_executor "$id"
-                    continue 2
-                fi
-                echo "local.sh: $name died more than ${EXECUTOR_RESTARTS:-3} times" >&2
-            fi
+        kill -0 "$pid" 2>/dev/null && continue
+        status=0
+        wait "$pid" || status=$?
+        name=${names[$pid]}
+        remaining=()
+        for p in "${pids[@]}"; do [[ $p != "$pid" ]] && remaining+=("$p"); done
+        pids=("${remaining[@]}")
+        echo "local.sh: $name (pid $pid) exited with status $status; see $dir/$name.log" >&2
+        if [[ $name == learner && $status == 0 ]]; then # max_updates reached
+            stop_all
+            exit 0
+        fi
+        restarts[$name]=$((${restarts[$name]:-0} + 1))
+        count=${restarts[$name]}
+        if [[ $count -gt $max_restarts ]]; then
+            echo "local.sh: $name died more than $max_restarts times; stopping the run" >&2
             # The error, not a backtrace: anyhow prints "Error: ..." first.
             grep -m1 -A3 '^Error' "$dir/$name.log" >&2 || tail -n 5 "$dir/$name.log" >&2 || true
             stop_all
-            [[ ${names[$pid]} == learner && $status == 0 ]] && exit 0 # max_updates reached
             exit 1
         fi
+        wait_s=$((1 << (count - 1)))
+        [[ $wait_s -gt 30 ]] && wait_s=30
+        due[$name]=$((now + wait_s))
+        echo "$now restart $name $count $status" >>"$dir/supervisor.log"
+        echo "local.sh: restart $count of $name in $wait_s s (from its own state); the others go on" >&2
     done
-    if [[ -n $deadline && $(date +%s) -ge $deadline ]]; then
+    if [[ -n $deadline && $now -ge $deadline ]]; then
         echo "local.sh: $MINUTES minutes are up; stopping $run_id" >&2
         stop_all
         [[ -x $bin/sac-lsp ]] && "$bin/sac-lsp" plot --input "$dir/monitor.jsonl" --out-dir "$dir" || true

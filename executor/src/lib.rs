@@ -53,7 +53,7 @@ pub use inbox::{Control, Inbox, Taken};
 use node::{Bus, Rejects, Shutdown};
 use proto::{DurableMarks, GlobalStep, topics};
 pub use rollout::{Rollout, StepOutcome};
-pub use spool::{Spool, SpoolCounts};
+pub use spool::{LedgerEntry, Spool, SpoolCounts, read_ledger};
 use tokio::sync::{mpsc, watch};
 pub use worker::{Out, Progress, Wait, WorkerReport};
 use zenoh::qos::CongestionControl;

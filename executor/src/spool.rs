@@ -178,6 +178,55 @@ impl Spool {
     }
 }
 
+/// One line of a spool's ledger.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LedgerEntry {
+    /// `None` for `produced`; the reason for `dropped <reason>`.
+    pub dropped: Option<String>,
+    /// The batch's stream.
+    pub stream: u64,
+    /// Its number in the stream.
+    pub seq: u64,
+    /// Transitions in it.
+    pub transitions: u64,
+}
+
+/// Executor `executor_id`'s ledger under `spool_dir` (empty if it never spooled), and the batches
+/// its spool still holds: what an audit of a run adds up.
+pub fn read_ledger(spool_dir: &Path, executor_id: u32) -> io::Result<(Vec<LedgerEntry>, Vec<Key>)> {
+    let dir = spool_dir.join(format!("executor-{executor_id}"));
+    let text = match fs::read_to_string(dir.join("ledger")) {
+        Ok(text) => text,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok((Vec::new(), Vec::new())),
+        Err(e) => return Err(e),
+    };
+    let entries = text.lines().filter_map(parse_entry).collect();
+    let mut held = Vec::new();
+    for entry in fs::read_dir(&dir)? {
+        if let Some(key) = entry?.file_name().to_str().and_then(parse_name) {
+            held.push(key);
+        }
+    }
+    held.sort_unstable();
+    Ok((entries, held))
+}
+
+fn parse_entry(line: &str) -> Option<LedgerEntry> {
+    let words: Vec<&str> = line.split(' ').collect();
+    let (dropped, rest) = match words.as_slice() {
+        ["produced", rest @ ..] => (None, rest),
+        ["dropped", reason, rest @ ..] => (Some(reason.to_string()), rest),
+        _ => return None,
+    };
+    let [stream, seq, n] = rest else { return None };
+    Some(LedgerEntry {
+        dropped,
+        stream: u64::from_str_radix(stream, 16).ok()?,
+        seq: seq.parse().ok()?,
+        transitions: n.parse().ok()?,
+    })
+}
+
 fn decode(frame: &[u8]) -> Option<ExperienceBatch> {
     proto::decode::<ExperienceBatch>(frame).ok()
 }
@@ -195,14 +244,8 @@ fn read_produced(path: &Path) -> io::Result<BTreeSet<Key>> {
         Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(BTreeSet::new()),
         Err(e) => return Err(e),
     };
-    Ok(text.lines().filter_map(parse_produced).collect())
-}
-
-/// `produced <stream hex> <seq> <n>` → key.
-fn parse_produced(line: &str) -> Option<Key> {
-    let mut words = line.split(' ');
-    (words.next()? == "produced").then_some(())?;
-    Some((u64::from_str_radix(words.next()?, 16).ok()?, words.next()?.parse().ok()?))
+    let produced = text.lines().filter_map(parse_entry).filter(|e| e.dropped.is_none());
+    Ok(produced.map(|e| (e.stream, e.seq)).collect())
 }
 
 #[cfg(test)]
@@ -303,5 +346,12 @@ mod tests {
         let lines = ledger(dir.path());
         assert!(lines.contains(&"dropped spool_overflow 1 0 4".to_string()), "{lines:?}");
         assert!(lines.contains(&"dropped invalid 1 3 4".to_string()), "{lines:?}");
+        let (entries, held) = read_ledger(dir.path(), 3).unwrap();
+        assert_eq!(held, [(1, 1), (1, 2)]);
+        assert_eq!(entries.len(), 5);
+        let overflow =
+            LedgerEntry { dropped: Some("spool_overflow".into()), stream: 1, seq: 0, transitions: 4 };
+        assert!(entries.contains(&overflow));
+        assert_eq!(entries.iter().filter(|e| e.dropped.is_none()).count(), 3);
     }
 }

@@ -24,6 +24,10 @@ pub enum InitialPriority {
     Max,
 }
 
+/// `SACLSP_REPLAY_SNAPSHOT`: overrides `snapshot_path`, so a launcher can keep each run's snapshot
+/// in its folder without editing the shared run file.
+pub const SNAPSHOT_PATH_ENV: &str = "SACLSP_REPLAY_SNAPSHOT";
+
 /// Configuration of the replay-server role. Every field has a documented default.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -64,7 +68,8 @@ pub struct ReplayServerConfig {
     /// server continues the same sample sequence. Default 0.
     pub seed: u64,
     /// Snapshot file; restored at start when it exists, written periodically and at shutdown.
-    /// Default none: no snapshots (and no snapshot replica in memory).
+    /// Default none: no snapshots (and no snapshot replica in memory). The environment variable
+    /// `SACLSP_REPLAY_SNAPSHOT` overrides it (`deploy/local.sh` with `DURABLE=1`).
     pub snapshot_path: Option<PathBuf>,
     /// Seconds between periodic snapshots; 0 = only at shutdown. Default 600.
     pub snapshot_interval_s: u64,
@@ -300,6 +305,9 @@ impl node::RoleConfig for ReplayServerConfig {
         let task: sim::Task = keys.task.parse().map_err(|e| format!("[train] task: {e}"))?;
         let dims = her.dims(task);
         (config.obs_dim, config.act_dim) = (dims.obs_dim as u32, dims.act_dim as u32);
+        if let Some(path) = std::env::var_os(SNAPSHOT_PATH_ENV) {
+            config.snapshot_path = Some(path.into());
+        }
         Ok(config)
     }
 }

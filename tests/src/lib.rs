@@ -12,6 +12,8 @@
 //! # Ok(()) }
 //! ```
 
+pub mod audit;
+
 use std::collections::BTreeMap;
 use std::future::Future;
 use std::sync::{Arc, Mutex, PoisonError};
@@ -202,12 +204,29 @@ impl Cluster {
         self.replay.trigger.fire();
         let stopped = within("the old replay server to stop", WAIT, &mut self.replay.task).await?;
         let report = stopped.context("the old replay server panicked")??;
+        self.start_replay().await?;
+        Ok(report)
+    }
+
+    /// Kills the replay server without a clean shutdown (no final snapshot): its task is aborted,
+    /// its session dropped, as a crashed process's would be. [`Cluster::start_replay`] starts the
+    /// next one.
+    pub async fn kill_replay(&mut self) -> Result<()> {
+        self.replay.task.abort();
+        let _ = within("the killed replay server's task", WAIT, &mut self.replay.task).await?;
+        let (trigger, _) = Shutdown::new();
+        std::mem::forget(std::mem::replace(&mut self.replay.trigger, trigger));
+        Ok(())
+    }
+
+    /// Starts a replay server on the run's endpoint (after [`Cluster::kill_replay`]); it restores
+    /// the run file's snapshot if there is one. Returns once it is alive.
+    pub async fn start_replay(&mut self) -> Result<()> {
         let server = BusConfig { listen: vec![self.endpoint.clone()], ..BusConfig::default() };
         let bus = open(&self.run, Role::Replay, 0, &server).await?;
         let config = role_config(&self.config)?;
         self.replay = spawn(|s| replay_server::run(config, bus, s));
-        self.wait_alive(NodeId { role: Role::Replay, id: 0 }).await?;
-        Ok(report)
+        self.wait_alive(NodeId { role: Role::Replay, id: 0 }).await
     }
 
     /// Kills executor `id` without a clean shutdown: its task is aborted mid-step, its session

@@ -19,6 +19,9 @@ pub struct MonitorState {
     run: RunId,
     reports: HashMap<NodeId, StatsReport>,
     alive: HashMap<NodeId, bool>,
+    /// Times each process's token came back after vanishing: its restarts (a supervisor's, or a
+    /// user's), or a link that dropped and came back.
+    returns: HashMap<NodeId, u64>,
     barriers: HashMap<u32, BarrierReport>,
     /// Env steps per executor id, over its processes, from every report that carries them.
     env_steps: HashMap<u32, StepCount>,
@@ -36,6 +39,7 @@ impl MonitorState {
             run,
             reports: HashMap::new(),
             alive: HashMap::new(),
+            returns: HashMap::new(),
             barriers: HashMap::new(),
             env_steps: HashMap::new(),
             recent_returns: VecDeque::with_capacity(RECENT_EPISODES),
@@ -118,7 +122,9 @@ impl MonitorState {
         self.received.add(Family::Liveliness);
         match Topic::parse(&self.run, key) {
             Ok(Topic::Liveliness(node)) => {
-                self.alive.insert(node, alive);
+                if self.alive.insert(node, alive) == Some(false) && alive {
+                    *self.returns.entry(node).or_default() += 1;
+                }
             }
             _ => self.undecodable.add(Family::Liveliness),
         }
@@ -220,6 +226,16 @@ impl MonitorState {
         let mut reports: Vec<&StatsReport> = self.reports.values().collect();
         reports.sort_by_key(|r| (role_rank(r.role), r.id));
         reports
+    }
+
+    /// How often `node`'s token came back after vanishing (restarts, or links lost and found).
+    pub fn restarts(&self, node: NodeId) -> u64 {
+        self.returns.get(&node).copied().unwrap_or(0)
+    }
+
+    /// Returns of every process together.
+    pub fn restarts_total(&self) -> u64 {
+        self.returns.values().sum()
     }
 
     /// Whether `node`'s liveliness token is up (`None`: never seen).

@@ -27,7 +27,7 @@ pub fn line(state: &MonitorState, tick: &Tick) -> String {
     let dead = tick.executors.iter().filter(|e| e.alive == Some(false)).count();
     let eval = state.last_eval().map(|e| e.mean_return);
     format!(
-        "up {} | learner step {} {} updates/s | env steps {} {}/s | replay {} | executors {} ({dead} dead, {} blocked entries) | recent return {} | eval {}",
+        "up {} | learner step {} {} updates/s | env steps {} {}/s | replay {} | executors {} ({dead} dead, {} blocked entries) | returns {} | recent return {} | eval {}",
         clock(tick.now.elapsed_s),
         int(tick.learner_step),
         num(learner("learner/updates_per_s")),
@@ -36,6 +36,7 @@ pub fn line(state: &MonitorState, tick: &Tick) -> String {
         num(tick.replay_size),
         tick.executors.len(),
         tick.blocked.len(),
+        state.restarts_total(),
         num(state.recent_return().map(|r| r.mean)),
         num(eval),
     )
@@ -168,9 +169,13 @@ fn write_nodes(s: &mut String, state: &MonitorState, tick: &Tick) -> std::fmt::R
         .into_iter()
         .map(|r| {
             let age = tick.now.unix_ms.saturating_sub(r.unix_ms) as f64 / 1000.0;
-            let dead =
-                if state.is_alive(NodeId { role: r.role, id: r.id }) == Some(false) { " DEAD" } else { "" };
-            format!("{} {age:.1}s{dead}", node_name(r.node()))
+            let node = NodeId { role: r.role, id: r.id };
+            let dead = if state.is_alive(node) == Some(false) { " DEAD" } else { "" };
+            let restarts = match state.restarts(node) {
+                0 => String::new(),
+                n => format!(" (back {n}x)"),
+            };
+            format!("{} {age:.1}s{dead}{restarts}", node_name(r.node()))
         })
         .collect();
     if nodes.is_empty() {

@@ -1,0 +1,58 @@
+//! `experience-audit --config RUN_FILE --snapshot REPLAY_SNAPSHOT --spool SPOOL_DIR --executors N`:
+//! the account of a stopped durable run's experience ([`cluster::audit`]): every batch in the
+//! executors' spool ledgers against the replay server's final snapshot. Prints one line per figure
+//! and exits 1 if any transition was lost. `deploy/soak.sh` runs it after its soak.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Parser;
+use replay_server::ReplayServerConfig;
+
+/// Audits a stopped durable run's experience.
+#[derive(Debug, Parser)]
+#[command(name = "experience-audit")]
+struct Args {
+    /// The run file the run used (for the replay buffer's shape).
+    #[arg(long)]
+    config: PathBuf,
+    /// The replay server's snapshot, written at its clean shutdown.
+    #[arg(long)]
+    snapshot: PathBuf,
+    /// The executors' spool folder (`runs/<run-id>/spool`).
+    #[arg(long)]
+    spool: PathBuf,
+    /// Executors 0..N.
+    #[arg(long)]
+    executors: u32,
+}
+
+fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
+    let text = std::fs::read_to_string(&args.config)
+        .with_context(|| format!("reading {}", args.config.display()))?;
+    let config: ReplayServerConfig = cluster::role_config(&text)?;
+    let (buffer, sidecar) = replay_server::read_file(&args.snapshot, config.buffer.clone(), config.dims())?
+        .with_context(|| format!("no replay snapshot at {}", args.snapshot.display()))?;
+    let audit = cluster::audit::audit(&args.spool, 0..args.executors, &sidecar.streams)?;
+    let inserted = sidecar.counters.inserted_transitions;
+    println!("snapshot: sequence {}, {} transitions held", sidecar.sequence, buffer.len());
+    println!("produced: {} transitions in {} batches", audit.produced, audit.produced_batches);
+    println!(
+        "stored: {} (the replay server counts {inserted} inserted; {} evicted by FIFO since)",
+        audit.stored,
+        inserted.saturating_sub(buffer.len() as u64)
+    );
+    println!(
+        "duplicates recognised: {} batches re-sent and not stored twice",
+        sidecar.counters.duplicate_batches
+    );
+    let dropped: Vec<String> = audit.dropped.iter().map(|(why, n)| format!("{n} {why}")).collect();
+    println!("dropped: {}", if dropped.is_empty() { "none".to_string() } else { dropped.join(", ") });
+    println!("pending in spools: {}", audit.pending);
+    println!("lost: {}", audit.lost);
+    if audit.lost > 0 {
+        std::process::exit(1);
+    }
+    Ok(())
+}
