@@ -76,7 +76,10 @@ use replay::ReplayBuffer;
 pub use replica::SnapshotLog;
 pub use scan::{CHUNK as SCAN_CHUNK_TRANSITIONS, PriorityDigest, PriorityScan};
 pub use service::{SampleOutcome, Service, ServiceCounters, Waiting};
-pub use snapshot::{SERVER_SNAPSHOT_MAGIC, SERVER_SNAPSHOT_VERSION, Sidecar, SnapshotFileError, read_file};
+pub use snapshot::{
+    SERVER_SNAPSHOT_MAGIC, SERVER_SNAPSHOT_VERSION, Sidecar, SnapshotFileError, read_file,
+    read_from as read_snapshot,
+};
 pub use streams::Streams;
 
 use crate::replica::Replica;
