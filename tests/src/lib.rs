@@ -223,7 +223,19 @@ impl Cluster {
     /// the run file's snapshot if there is one. Returns once it is alive.
     pub async fn start_replay(&mut self) -> Result<()> {
         let server = BusConfig { listen: vec![self.endpoint.clone()], ..BusConfig::default() };
-        let bus = open(&self.run, Role::Replay, 0, &server).await?;
+        // A killed server's session is closed in the background: its listener may hold the port a
+        // little longer, as a crashed process's socket would.
+        let bus = within("the replay server's port to be free", WAIT, async {
+            loop {
+                match open(&self.run, Role::Replay, 0, &server).await {
+                    Err(e) if format!("{e:#}").contains("Address already in use") => {
+                        tokio::time::sleep(Duration::from_millis(50)).await;
+                    }
+                    opened => return opened,
+                }
+            }
+        })
+        .await??;
         let config = role_config(&self.config)?;
         self.replay = spawn(|s| replay_server::run(config, bus, s));
         self.wait_alive(NodeId { role: Role::Replay, id: 0 }).await
