@@ -41,13 +41,18 @@ pub(crate) fn report(
         r.push_metric("executor/learner_step_seen", step.learner_step as f64);
     }
     if let Some(c) = spool {
-        r.push_metric("executor/spool_held_batches", c.held_batches as f64);
-        r.push_metric("executor/spool_held_bytes", c.held_bytes as f64);
-        r.push_metric("executor/spool_produced_transitions", c.produced_transitions as f64);
-        r.push_metric("executor/spool_durable_batches", c.durable_batches as f64);
-        r.push_metric("executor/spool_resent_batches", c.resent_batches as f64);
-        r.push_metric("executor/spool_overflow_batches", c.overflow_batches as f64);
-        r.push_metric("executor/spool_invalid_batches", c.invalid_batches as f64);
+        let figures = [
+            ("held_batches", c.held_batches),
+            ("held_bytes", c.held_bytes),
+            ("produced_transitions", c.produced_transitions),
+            ("durable_batches", c.durable_batches),
+            ("resent_batches", c.resent_batches),
+            ("overflow_batches", c.overflow_batches),
+            ("invalid_batches", c.invalid_batches),
+        ];
+        for (name, value) in figures {
+            r.push_metric(format!("executor/spool_{name}"), value as f64);
+        }
     }
     if let Some(w) = &p.waiting {
         r.blocked.push(BlockedReason { what: w.wait.what().into(), why: w.wait.why(), since_ms: w.since_ms });
