@@ -311,13 +311,16 @@ impl Learner {
         let dev = &Device::Cpu;
         t.push(("learner.step".into(), Tensor::from_slice(&[self.step as i64], 1, dev)?));
         t.push(("learner.seed".into(), Tensor::from_slice(&[self.seed as i64], 1, dev)?));
-        let safetensors = encode(&t, &[("step", self.step.to_string())])?;
+        let metadata = crate::resume::metadata(&self.cfg, self.step);
+        let metadata: Vec<(&str, String)> = metadata.iter().map(|(k, v)| (k.as_str(), v.clone())).collect();
+        let safetensors = encode(&t, &metadata)?;
         Ok(Checkpoint { step: self.step, safetensors })
     }
 
     /// Restores a learner from [`checkpoint`](Self::checkpoint)'s output; `cfg` must describe the
     /// same networks.
     pub fn from_checkpoint(cfg: AgentConfig, checkpoint: &Checkpoint) -> Result<Self> {
+        crate::resume::check_resume(&cfg, checkpoint)?;
         let t = decode(&checkpoint.safetensors)?;
         let mut learner = Self::new(cfg, read_i64(&t, "learner.seed")? as u64)?;
         learner.nets.import(&t)?;

@@ -23,6 +23,7 @@
 //! | `acting.rs` | [`Actor`]: `act(obs, Mode)`, `load(&ParamSnapshot)`, `td_errors(&Batch)` |
 //! | `stack.rs` | [`PolicyStack`]: frozen lower levels of a hierarchy, shipped as weights, content-hashed, embedded in checkpoints |
 //! | `params.rs` | [`ParamSnapshot`], [`Checkpoint`]: safetensors bytes with stable names |
+//! | `resume.rs` | what a checkpoint holds and the settings it refuses to resume across |
 //! | `networks.rs`, `vars.rs` | the networks of one level, each in its own `VarMap`, seeded init |
 //! | `fused/` | [`FusedLearner`]: the same update hand-fused on `gemm`; [`AnyLearner`] picks a [`Backend`] |
 //!
@@ -74,6 +75,7 @@ mod nstep;
 mod optim;
 mod params;
 mod policy;
+mod resume;
 mod schema;
 mod stack;
 mod target;
@@ -101,6 +103,7 @@ pub use nstep::{NStepReturns, NStepTransition, StepEnd};
 pub use optim::{Adam, AdamConfig};
 pub use params::{Checkpoint, ParamSnapshot, saved_learner_step};
 pub use policy::{BijectorOutput, LatentPolicy, PolicySample};
+pub use resume::{CONTAINS, CONTAINS_KEY, check_resume, checkpoint_metadata, resume_settings};
 pub use schema::{Schema, networks_from_schema, snapshot_schema};
 pub use stack::{FROZEN_PREFIX, Level, MAX_FROZEN_LEVELS, PolicyStack};
 pub use target::polyak_update;

@@ -135,6 +135,7 @@ impl FusedLearner {
     pub fn from_checkpoint(cfg: AgentConfig, checkpoint: &Checkpoint) -> Result<Self> {
         cfg.validate()?;
         Self::check_support(&cfg)?;
+        crate::resume::check_resume(&cfg, checkpoint)?;
         let t = decode(&checkpoint.safetensors)?;
         let layout = Layout::new(&cfg);
         let n = layout.len;
@@ -250,7 +251,9 @@ impl FusedLearner {
         }
         t.push(("learner.step".into(), Tensor::from_slice(&[self.step as i64], 1, dev)?));
         t.push(("learner.seed".into(), Tensor::from_slice(&[self.seed as i64], 1, dev)?));
-        let safetensors = encode(&t, &[("step", self.step.to_string())])?;
+        let metadata = crate::resume::metadata(&self.cfg, self.step);
+        let metadata: Vec<(&str, String)> = metadata.iter().map(|(k, v)| (k.as_str(), v.clone())).collect();
+        let safetensors = encode(&t, &metadata)?;
         Ok(Checkpoint { step: self.step, safetensors })
     }
 }

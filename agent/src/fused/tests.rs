@@ -391,3 +391,32 @@ fn dispatch_runs_every_option_fused_and_names_what_it_cannot() {
     let back = Learner::from_checkpoint(learned, &fused.checkpoint().unwrap()).unwrap();
     assert_eq!(back.temperature().unwrap(), fused.temperature());
 }
+
+#[test]
+fn a_checkpoint_names_what_it_holds_and_refuses_a_changed_setting() {
+    let cfg = tiny();
+    let checkpoint = FusedLearner::new(cfg.clone(), 4).unwrap().checkpoint().unwrap();
+    let metadata = crate::checkpoint_metadata(&checkpoint.safetensors).unwrap();
+    assert_eq!(metadata[crate::CONTAINS_KEY], crate::CONTAINS);
+    assert_eq!(metadata["setting.critic_hidden"], "[6, 5]");
+    // Tunable settings may change on resume, on either backend.
+    let retuned = AgentConfig { learning_rate: 5e-4, batch_size: 7, discount: 0.9, ..cfg.clone() };
+    assert!(Learner::from_checkpoint(retuned.clone(), &checkpoint).is_ok());
+    assert!(FusedLearner::from_checkpoint(retuned, &checkpoint).is_ok());
+    // Shapes, the critic and which state exists may not; the error names the setting. (One Q
+    // network fewer would otherwise resume silently, dropping the second Q's weights and moments.)
+    let changed = [
+        ("twin_q", AgentConfig { twin_q: !cfg.twin_q, ..cfg.clone() }),
+        ("critic_hidden", AgentConfig { critic_hidden: vec![6], ..cfg.clone() }),
+        ("learn_temperature", AgentConfig { learn_temperature: !cfg.learn_temperature, ..cfg.clone() }),
+        ("obs_dim", AgentConfig { obs_dim: 4, ..cfg.clone() }),
+    ];
+    for (setting, other) in changed {
+        let error = Learner::from_checkpoint(other.clone(), &checkpoint).unwrap_err().to_string();
+        assert!(error.contains(&format!("[agent] {setting} = ")), "{setting}: {error}");
+        if FusedLearner::check_support(&other).is_ok() {
+            let error = FusedLearner::from_checkpoint(other, &checkpoint).unwrap_err().to_string();
+            assert!(error.contains(setting), "{setting}: {error}");
+        }
+    }
+}

@@ -1,0 +1,84 @@
+//! What a checkpoint says about itself: its safetensors metadata names what it contains and the
+//! [`AgentConfig`] settings that shaped it, and a learner refuses to resume from it into a run whose
+//! settings differ in any of those, naming the setting (a shape change would otherwise fail on a
+//! tensor name, or, for `twin_q` or `learn_temperature`, silently drop state).
+
+use std::collections::HashMap;
+
+use crate::config::AgentConfig;
+use crate::error::{Error, Result};
+use crate::params::Checkpoint;
+
+/// The metadata key listing what a learner checkpoint holds.
+pub const CONTAINS_KEY: &str = "contains";
+/// What every learner checkpoint holds, in words (both backends write the same tensors).
+pub const CONTAINS: &str = "networks (policy, Q, V, target V), Adam moments and step counts per network, the \
+                            temperature and its Adam state when learned, learner step, learner seed";
+/// Prefix of the metadata keys that record a setting.
+const SETTING_PREFIX: &str = "setting.";
+
+/// The settings a checkpoint cannot be resumed across: network shapes (from the task's widths and
+/// the run file), the critic's variant, and which state exists. Learning rates, batch size,
+/// discount and the like may change on resume.
+pub fn resume_settings(cfg: &AgentConfig) -> Vec<(&'static str, String)> {
+    let c = &cfg.categorical;
+    let mut settings = vec![
+        ("obs_dim", cfg.obs_dim.to_string()),
+        ("act_dim", cfg.act_dim.to_string()),
+        ("critic_hidden", format!("{:?}", cfg.critic_hidden)),
+        ("embedding_layers", format!("{:?}", cfg.embedding_layers)),
+        ("embedding_output_relu", cfg.embedding_output_relu.to_string()),
+        ("coupling_layers", cfg.coupling_layers.to_string()),
+        ("coupling_hidden", format!("{:?}", cfg.coupling_hidden)),
+        ("squash", cfg.squash.to_string()),
+        ("twin_q", cfg.twin_q.to_string()),
+        ("learn_temperature", cfg.learn_temperature.to_string()),
+        ("critic", format!("{:?}", cfg.critic)),
+    ];
+    if cfg.critic == crate::config::Critic::Categorical {
+        settings.push((
+            "categorical",
+            format!("{:?} atoms {} on [{}, {}]", c.variant, c.atoms, c.v_min, c.v_max),
+        ));
+    }
+    settings
+}
+
+/// The metadata a learner checkpoint at `step` of `cfg` carries.
+pub(crate) fn metadata(cfg: &AgentConfig, step: u64) -> Vec<(String, String)> {
+    let mut m =
+        vec![("step".to_string(), step.to_string()), (CONTAINS_KEY.to_string(), CONTAINS.to_string())];
+    m.extend(resume_settings(cfg).into_iter().map(|(k, v)| (format!("{SETTING_PREFIX}{k}"), v)));
+    m
+}
+
+/// The metadata of safetensors bytes (empty when there is none).
+pub fn checkpoint_metadata(bytes: &[u8]) -> Result<HashMap<String, String>> {
+    let (_, metadata) =
+        safetensors::SafeTensors::read_metadata(bytes).map_err(|e| Error::BadSnapshot(e.to_string()))?;
+    Ok(metadata.metadata().clone().unwrap_or_default())
+}
+
+/// Refuses `checkpoint` for a learner of `cfg` if it records a setting that differs, naming it.
+/// Checkpoints written before settings were recorded pass (their tensors are still checked).
+pub fn check_resume(cfg: &AgentConfig, checkpoint: &Checkpoint) -> Result<()> {
+    let saved = checkpoint_metadata(&checkpoint.safetensors)?;
+    for (key, now) in resume_settings(cfg) {
+        match saved.get(&format!("{SETTING_PREFIX}{key}")) {
+            Some(then) if *then != now => {
+                // The widths are not [agent] keys: they come from the task (and HER's goal).
+                let source = match key {
+                    "obs_dim" | "act_dim" => "the run's task ([train] task, [her])",
+                    _ => "the run file",
+                };
+                return Err(Error::InvalidConfig(format!(
+                    "the checkpoint at step {} was trained with [agent] {key} = {then}, {source} gives {now}: \
+                     resume with the same setting, or start a new run",
+                    checkpoint.step
+                )));
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
