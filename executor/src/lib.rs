@@ -53,7 +53,7 @@ pub use inbox::{Control, Inbox, Taken};
 use node::{Bus, Rejects, Shutdown};
 use proto::{DurableMarks, GlobalStep, topics};
 pub use rollout::{Rollout, StepOutcome};
-pub use spool::{LedgerEntry, Spool, SpoolCounts, read_ledger};
+pub use spool::{LedgerEntry, Released, Spool, SpoolCounts, read_ledger};
 use tokio::sync::{mpsc, watch};
 pub use worker::{Out, Progress, Wait, WorkerReport};
 use zenoh::qos::CongestionControl;
@@ -187,16 +187,18 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
                 None => { worker_done = true; break; }
             },
             Ok(sample) = durable_sub.recv_async() => match proto::decode::<DurableMarks>(&sample.payload().to_bytes()) {
-                Ok(marks) => if let Some(spool) = spool.as_mut()
-                    && let Err(error) = spool.on_marks(&marks)
-                {
-                    tracing::warn!(%error, "could not release durable batches from the spool");
+                Ok(marks) => if let Some(spool) = spool.as_mut() {
+                    match spool.on_marks(&marks) {
+                        Ok(released) => resend(spool, &experience_pub, released.stalled, "a stream's durable prefix stalled").await,
+                        Err(error) => tracing::warn!(%error, "could not release durable batches from the spool"),
+                    }
                 },
                 Err(error) => lock(&rejects).decode_failed("durable", &error),
             },
             Ok(sample) = replay_sub.recv_async() => {
                 if sample.kind() == SampleKind::Put && let Some(spool) = spool.as_mut() {
-                    resend(spool, &experience_pub).await;
+                    let held = spool.held();
+                    resend(spool, &experience_pub, held, "a replay server appeared").await;
                 }
             }
         }
@@ -239,14 +241,18 @@ fn new_stream() -> u64 {
     executor_seed(nanos, std::process::id()).max(1)
 }
 
-/// Sends every batch the spool holds again, oldest first (the replay server stores each once).
-async fn resend(spool: &mut Spool, experience: &zenoh::pubsub::Publisher<'_>) {
-    let held = spool.held();
-    if held.is_empty() {
+/// Sends the spooled batches `keys` again, in order (the replay server stores each once).
+async fn resend(
+    spool: &mut Spool,
+    experience: &zenoh::pubsub::Publisher<'_>,
+    keys: Vec<spool::Key>,
+    why: &str,
+) {
+    if keys.is_empty() {
         return;
     }
-    tracing::info!(batches = held.len(), "a replay server appeared: sending the spool again");
-    for key in held {
+    tracing::info!(batches = keys.len(), why, "sending spooled batches again");
+    for key in keys {
         let Some(frame) = spool.resend(key) else { continue };
         if let Err(error) = experience.put(frame).await {
             tracing::warn!(%error, "re-send failed");

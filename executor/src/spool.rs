@@ -53,6 +53,19 @@ pub struct Spool {
     held: BTreeMap<Key, u64>,
     ledger: File,
     counts: SpoolCounts,
+    /// Per stream, the durable prefix the last marks gave and their snapshot's number.
+    prefixes: BTreeMap<u64, (u64, u64)>,
+}
+
+/// What one [`DurableMarks`] did to the spool.
+#[derive(Debug, Default, Clone, PartialEq, Eq)]
+pub struct Released {
+    /// Batches released as durable.
+    pub durable: u64,
+    /// Held batches at which a stream's durable prefix has not moved across two snapshots: lost on
+    /// the way (the replay server stores a stream's batches in order, so the ones after it are
+    /// waiting on it) and to be sent again. A slow one sent twice is stored once.
+    pub stalled: Vec<Key>,
 }
 
 impl Spool {
@@ -70,6 +83,7 @@ impl Spool {
             held: BTreeMap::new(),
             ledger,
             counts: SpoolCounts::default(),
+            prefixes: BTreeMap::new(),
         };
         for entry in fs::read_dir(&spool.dir)? {
             let path = entry?.path();
@@ -122,19 +136,33 @@ impl Spool {
         Ok(Some(frame))
     }
 
-    /// Releases every held batch of this executor that `marks` says is durable; returns how many.
-    pub fn on_marks(&mut self, marks: &DurableMarks) -> io::Result<u64> {
+    /// Releases every held batch of this executor that `marks` says is durable, and finds the
+    /// batches its streams' prefixes are stalled at.
+    pub fn on_marks(&mut self, marks: &DurableMarks) -> io::Result<Released> {
+        let id = self.executor_id;
         let durable: Vec<Key> = self
             .held
             .keys()
-            .filter(|(stream, seq)| marks.durable_below(self.executor_id, *stream).is_some_and(|b| *seq < b))
+            .filter(|(stream, seq)| marks.durable_below(id, *stream).is_some_and(|b| *seq < b))
             .copied()
             .collect();
         for key in &durable {
             self.release(*key)?;
         }
         self.counts.durable_batches += durable.len() as u64;
-        Ok(durable.len() as u64)
+        let mut stalled = Vec::new();
+        for mark in marks.marks.iter().filter(|m| m.executor_id == id) {
+            let now = (mark.durable_below, marks.snapshot_sequence);
+            let before = self.prefixes.insert(mark.stream, now);
+            let key = (mark.stream, mark.durable_below);
+            // The same prefix in a later snapshot, and its next batch is one we sent.
+            if before.is_some_and(|(below, sequence)| below == now.0 && sequence < now.1)
+                && self.held.contains_key(&key)
+            {
+                stalled.push(key);
+            }
+        }
+        Ok(Released { durable: durable.len() as u64, stalled })
     }
 
     /// The batches held, oldest first (what a re-send sends).
@@ -298,8 +326,8 @@ mod tests {
             let frame = spool.push(&batch(0xab, seq, 5)).unwrap().unwrap();
             assert_eq!(decode(&frame).unwrap().seq, seq);
         }
-        assert_eq!(spool.on_marks(&marks(0xab, 2)).unwrap(), 2);
-        assert_eq!(spool.on_marks(&marks(0xcd, 9)).unwrap(), 0, "another stream's marks");
+        assert_eq!(spool.on_marks(&marks(0xab, 2)).unwrap().durable, 2);
+        assert_eq!(spool.on_marks(&marks(0xcd, 9)).unwrap().durable, 0, "another stream's marks");
         assert_eq!(spool.held(), [(0xab, 2), (0xab, 3)]);
         drop(spool);
 
@@ -310,6 +338,25 @@ mod tests {
         assert_eq!(decode(&frame).unwrap(), batch(0xab, 3, 5));
         assert_eq!(ledger(dir.path()).len(), 4, "one produced line per batch, none added at reopening");
         assert_eq!(ledger(dir.path())[0], "produced ab 0 5");
+    }
+
+    #[test]
+    fn a_prefix_that_stalls_across_snapshots_names_the_batch_it_waits_on() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut spool = Spool::open(dir.path(), 3, 1 << 20).unwrap();
+        for seq in 0..5 {
+            spool.push(&batch(7, seq, 2)).unwrap();
+        }
+        let at = |sequence, below| DurableMarks { snapshot_sequence: sequence, ..marks(7, below) };
+        assert_eq!(spool.on_marks(&at(1, 1)).unwrap(), Released { durable: 1, stalled: vec![] });
+        // The same marks again (re-published between snapshots): not a stall.
+        assert_eq!(spool.on_marks(&at(1, 1)).unwrap().stalled, []);
+        // A later snapshot with the prefix still at 1 while 2.. were sent: batch 1 was lost.
+        assert_eq!(spool.on_marks(&at(2, 1)).unwrap().stalled, [(7, 1)]);
+        // Sent again and stored, the prefix jumps past the batches that waited on it.
+        assert_eq!(spool.on_marks(&at(3, 5)).unwrap(), Released { durable: 4, stalled: vec![] });
+        // An executor with nothing more to send (at the barrier) holds no batch at its prefix.
+        assert_eq!(spool.on_marks(&at(4, 5)).unwrap().stalled, []);
     }
 
     #[test]
