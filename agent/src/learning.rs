@@ -311,9 +311,7 @@ impl Learner {
         let dev = &Device::Cpu;
         t.push(("learner.step".into(), Tensor::from_slice(&[self.step as i64], 1, dev)?));
         t.push(("learner.seed".into(), Tensor::from_slice(&[self.seed as i64], 1, dev)?));
-        let metadata = crate::resume::metadata(&self.cfg, self.step);
-        let metadata: Vec<(&str, String)> = metadata.iter().map(|(k, v)| (k.as_str(), v.clone())).collect();
-        let safetensors = encode(&t, &metadata)?;
+        let safetensors = crate::resume::checkpoint_bytes(&t, &self.cfg, self.step)?;
         Ok(Checkpoint { step: self.step, safetensors })
     }
 

@@ -7,7 +7,9 @@ use std::collections::HashMap;
 
 use crate::config::AgentConfig;
 use crate::error::{Error, Result};
-use crate::params::Checkpoint;
+use candle_core::Tensor;
+
+use crate::params::{Checkpoint, encode};
 
 /// The metadata key listing what a learner checkpoint holds.
 pub const CONTAINS_KEY: &str = "contains";
@@ -44,12 +46,18 @@ pub fn resume_settings(cfg: &AgentConfig) -> Vec<(&'static str, String)> {
     settings
 }
 
-/// The metadata a learner checkpoint at `step` of `cfg` carries.
-pub(crate) fn metadata(cfg: &AgentConfig, step: u64) -> Vec<(String, String)> {
-    let mut m =
-        vec![("step".to_string(), step.to_string()), (CONTAINS_KEY.to_string(), CONTAINS.to_string())];
-    m.extend(resume_settings(cfg).into_iter().map(|(k, v)| (format!("{SETTING_PREFIX}{k}"), v)));
-    m
+/// The safetensors bytes of a learner checkpoint of `cfg` at `step` holding `tensors`, with the
+/// metadata that says what it holds and the settings that shaped it (both learners write this).
+pub(crate) fn checkpoint_bytes(
+    tensors: &[(String, Tensor)],
+    cfg: &AgentConfig,
+    step: u64,
+) -> Result<Vec<u8>> {
+    let settings: Vec<(String, String)> =
+        resume_settings(cfg).into_iter().map(|(k, v)| (format!("{SETTING_PREFIX}{k}"), v)).collect();
+    let mut metadata = vec![("step", step.to_string()), (CONTAINS_KEY, CONTAINS.to_string())];
+    metadata.extend(settings.iter().map(|(k, v)| (k.as_str(), v.clone())));
+    encode(tensors, &metadata)
 }
 
 /// The metadata of safetensors bytes (empty when there is none).
