@@ -229,12 +229,12 @@ impl MonitorState {
     }
 
     /// How often `node`'s token came back after vanishing (restarts, or links lost and found).
-    pub fn restarts(&self, node: NodeId) -> u64 {
+    pub fn returns(&self, node: NodeId) -> u64 {
         self.returns.get(&node).copied().unwrap_or(0)
     }
 
     /// Returns of every process together.
-    pub fn restarts_total(&self) -> u64 {
+    pub fn returns_total(&self) -> u64 {
         self.returns.values().sum()
     }
 

@@ -36,7 +36,7 @@ pub fn line(state: &MonitorState, tick: &Tick) -> String {
         num(tick.replay_size),
         tick.executors.len(),
         tick.blocked.len(),
-        state.restarts_total(),
+        state.returns_total(),
         num(state.recent_return().map(|r| r.mean)),
         num(eval),
     )
@@ -171,11 +171,11 @@ fn write_nodes(s: &mut String, state: &MonitorState, tick: &Tick) -> std::fmt::R
             let age = tick.now.unix_ms.saturating_sub(r.unix_ms) as f64 / 1000.0;
             let node = NodeId { role: r.role, id: r.id };
             let dead = if state.is_alive(node) == Some(false) { " DEAD" } else { "" };
-            let restarts = match state.restarts(node) {
+            let returns = match state.returns(node) {
                 0 => String::new(),
                 n => format!(" (back {n}x)"),
             };
-            format!("{} {age:.1}s{dead}{restarts}", node_name(r.node()))
+            format!("{} {age:.1}s{dead}{returns}", node_name(r.node()))
         })
         .collect();
     if nodes.is_empty() {

@@ -132,7 +132,7 @@ fn a_restarted_executor_adds_to_its_ids_steps() {
     assert_eq!(t.env_steps_total, Some(6800));
     assert_eq!(t.executors[2].env_steps, Some(1300));
     assert_eq!(t.executors[2].alive, Some(true));
-    assert_eq!((s.restarts(NodeId { role: Role::Executor, id: 2 }), s.restarts_total()), (1, 1));
+    assert_eq!((s.returns(NodeId { role: Role::Executor, id: 2 }), s.returns_total()), (1, 1));
     // A token that blips while the process goes on (a lost link) is not a new process.
     s.on_liveliness(&fixtures::liveliness(Role::Executor, 0), false);
     s.on_liveliness(&fixtures::liveliness(Role::Executor, 0), true);
