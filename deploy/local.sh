@@ -23,6 +23,10 @@
 # DURABLE=1: no produced transition is lost: the replay server snapshots to runs/<run-id>/replay.snap
 # (every [replay_server] snapshot_interval_s) and executors keep what it has not yet made durable in
 # runs/<run-id>/spool/ (see README "Durable experience").
+# AUTH=1: an authenticated run: deploy/certs.sh makes runs/<run-id>/auth/ (a CA of the run's own, a
+# certificate per role, and per role a zenoh config with mutual TLS and access control), every role
+# talks over tls/ endpoints with its role's certificate, and only the learner may publish weights,
+# only executors experience, and the monitor only listens (see README "Authenticated runs").
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
@@ -41,9 +45,19 @@ if [[ ${BUILD:-1} != 0 ]]; then
     cargo build --release -p replay-server -p param-server -p learner -p executor -p sac-lsp-cli
 fi
 bin=target/release
-hub="tcp/127.0.0.1:$port"
+scheme=tcp
+if [[ ${AUTH:-0} == 1 ]]; then
+    scheme=tls
+    [[ -f $dir/auth/ca.pem ]] || ./deploy/certs.sh "$dir/auth"
+fi
+hub="$scheme/127.0.0.1:$port"
 common=(--run-id "$run_id" --config "$config")
-peer=(--connect "$hub" --listen tcp/127.0.0.1:0)
+peer=(--connect "$hub" --listen "$scheme/127.0.0.1:0")
+# The zenoh config of a role's certificate (authenticated runs), as arguments.
+auth() {
+    [[ $scheme == tls ]] && echo "--zenoh-config $dir/auth/$1.json5"
+    return 0
+}
 export SACLSP_CHECKPOINT_DIR="$dir/checkpoints"
 if [[ ${DURABLE:-0} == 1 ]]; then
     export SACLSP_REPLAY_SNAPSHOT="$dir/replay.snap" SACLSP_SPOOL_DIR="$dir/spool"
@@ -93,15 +107,15 @@ start() { # name, command...
 # Starts role $1 (replay-server, param-server, learner, monitor or executor-<id>).
 launch() {
     case $1 in
-        replay-server) start "$1" "${rest[@]}" "$bin/replay-server" "${common[@]}" --listen "$hub" ;;
-        param-server) start "$1" "${rest[@]}" "$bin/param-server" "${common[@]}" "${peer[@]}" ;;
+        replay-server) start "$1" "${rest[@]}" "$bin/replay-server" "${common[@]}" --listen "$hub" $(auth replay) ;;
+        param-server) start "$1" "${rest[@]}" "$bin/param-server" "${common[@]}" "${peer[@]}" $(auth param) ;;
         learner)
-            start "$1" "${rest[@]}" "$bin/learner" "${common[@]}" "${peer[@]}"
+            start "$1" "${rest[@]}" "$bin/learner" "${common[@]}" "${peer[@]}" $(auth learner)
             place_learner_threads "${pids[-1]}"
             ;;
-        monitor) start "$1" "${rest[@]}" "$bin/sac-lsp" monitor --run-id "$run_id" "${peer[@]}" --out "$dir/monitor.jsonl" ;;
+        monitor) start "$1" "${rest[@]}" "$bin/sac-lsp" monitor --run-id "$run_id" "${peer[@]}" --out "$dir/monitor.jsonl" $(auth monitor) ;;
         executor-*)
-            start "$1" "${rest[@]}" nice -n "$nice_level" "$bin/executor" "${common[@]}" --id "${1#executor-}" "${peer[@]}"
+            start "$1" "${rest[@]}" nice -n "$nice_level" "$bin/executor" "${common[@]}" --id "${1#executor-}" "${peer[@]}" $(auth executor)
             ;;
     esac
 }
@@ -128,7 +142,7 @@ echo "local.sh: run $run_id, $n executors, run file $config, logs in $dir/" >&2
 for role in replay-server param-server learner $(seq -f 'executor-%g' 0 $((n - 1))) monitor; do
     launch "$role"
 done
-echo "local.sh: live view: $bin/sac-lsp monitor --run-id $run_id --connect $hub --out $dir/view.jsonl --no-tensorboard" >&2
+echo "local.sh: live view: $bin/sac-lsp monitor --run-id $run_id --connect $hub --out $dir/view.jsonl --no-tensorboard $(auth monitor)" >&2
 
 deadline=""
 [[ -n ${MINUTES:-} ]] && deadline=$(($(date +%s) + ${MINUTES%.*} * 60))
