@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use agent::PolicyStack;
 use node::{Bus, Shutdown};
-use proto::{ContentHash, FrozenLevels, topics};
+use proto::{ContentHash, FrozenLevels};
 
 use crate::lock;
 use crate::weights::{FetchError, RETRY, query};
@@ -31,7 +31,7 @@ pub(crate) async fn fetch(
     let started = Instant::now();
     let mut said = Instant::now();
     loop {
-        match query::<FrozenLevels>(bus, &topics::params_frozen(bus.run()), timeout).await {
+        match query::<FrozenLevels>(bus, proto::Topic::ParamsFrozen, timeout).await {
             Ok(Some(message)) => match check(message, depth) {
                 Ok(fetched) => {
                     tracing::info!(levels = depth, content_hash = %fetched.hash, "frozen levels received");

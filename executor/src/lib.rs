@@ -50,13 +50,12 @@ use std::time::Duration;
 use agent::{Actor, PolicyStack};
 pub use config::{ExecutorConfig, ExecutorSettings};
 pub use inbox::{Control, Inbox, Taken};
-use node::{Bus, Rejects, Shutdown};
-use proto::{DurableMarks, GlobalStep, topics};
+use node::{Bus, Delivery, Publisher, Rejects, Shutdown};
+use proto::{DurableMarks, GlobalStep, Topic};
 pub use rollout::{Rollout, StepOutcome};
 pub use spool::{LedgerEntry, Released, Spool, SpoolCounts, read_ledger};
 use tokio::sync::{mpsc, watch};
 pub use worker::{Out, Progress, Wait, WorkerReport};
-use zenoh::qos::CongestionControl;
 use zenoh::sample::SampleKind;
 
 /// What the role did, returned when it stops.
@@ -121,24 +120,13 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
         .with_hindsight(hindsight)
         .with_stream(if spool.is_some() { new_stream() } else { 0 });
 
-    let session = bus.session().clone();
-    let run = bus.run().clone();
-    let z = node::NodeError::zenoh;
-    let step_sub = session.declare_subscriber(topics::control_step(&run)).await.map_err(z)?;
-    let experience_pub = session
-        .declare_publisher(topics::experience(&run, id))
-        .congestion_control(CongestionControl::Block)
-        .await
-        .map_err(z)?;
-    let durable_sub = session.declare_subscriber(topics::replay_durable(&run)).await.map_err(z)?;
+    let queue = node::DEFAULT_QUEUE;
+    let step_sub = bus.subscribe(Topic::ControlStep, queue).await?;
+    let experience_pub = bus.publisher(Topic::Experience { executor_id: id }, Delivery::Block).await?;
+    let durable_sub = bus.subscribe(Topic::ReplayDurable, queue).await?;
     // Current tokens are delivered at declaration: a replay server already up counts as appearing,
     // so what earlier runs of this executor left in the spool is sent at once.
-    let replay_sub = session
-        .liveliness()
-        .declare_subscriber(topics::liveliness_role(&run, proto::Role::Replay))
-        .history(true)
-        .await
-        .map_err(z)?;
+    let replay_sub = bus.watch(proto::Role::Replay).await?;
     let _alive = bus.announce().await?;
     tracing::info!(seed, task = %config.train.task, spool = spool.is_some(), "executor up");
 
@@ -168,7 +156,7 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
     loop {
         tokio::select! {
             _ = shutdown.wait() => break,
-            Ok(sample) = step_sub.recv_async() => match proto::decode::<GlobalStep>(&sample.payload().to_bytes()) {
+            Ok(sample) = step_sub.recv() => match proto::decode::<GlobalStep>(&sample.payload().to_bytes()) {
                 Ok(step) => {
                     inbox.set_step(step);
                     announced_tx.send_if_modified(|v| {
@@ -186,7 +174,7 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
                 }
                 None => { worker_done = true; break; }
             },
-            Ok(sample) = durable_sub.recv_async() => match proto::decode::<DurableMarks>(&sample.payload().to_bytes()) {
+            Ok(sample) = durable_sub.recv() => match proto::decode::<DurableMarks>(&sample.payload().to_bytes()) {
                 Ok(marks) => if let Some(spool) = spool.as_mut() {
                     match spool.on_marks(&marks) {
                         Ok(released) => resend(spool, &experience_pub, released.stalled, "a stream's durable prefix stalled").await,
@@ -195,7 +183,7 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
                 },
                 Err(error) => lock(&rejects).decode_failed("durable", &error),
             },
-            Ok(sample) = replay_sub.recv_async() => {
+            Ok(sample) = replay_sub.recv() => {
                 if sample.kind() == SampleKind::Put && let Some(spool) = spool.as_mut() {
                     let held = spool.held();
                     resend(spool, &experience_pub, held, "a replay server appeared").await;
@@ -242,12 +230,7 @@ fn new_stream() -> u64 {
 }
 
 /// Sends the spooled batches `keys` again, in order (the replay server stores each once).
-async fn resend(
-    spool: &mut Spool,
-    experience: &zenoh::pubsub::Publisher<'_>,
-    keys: Vec<spool::Key>,
-    why: &str,
-) {
+async fn resend(spool: &mut Spool, experience: &Publisher, keys: Vec<spool::Key>, why: &str) {
     if keys.is_empty() {
         return;
     }
@@ -263,14 +246,13 @@ async fn resend(
 
 async fn publish(
     bus: &Bus,
-    experience: &zenoh::pubsub::Publisher<'_>,
+    experience: &Publisher,
     id: u32,
     message: Out,
     report: &mut Report,
     rejects: &Mutex<Rejects>,
     spool: Option<&mut Spool>,
 ) {
-    let run = bus.run();
     let result = match message {
         Out::Experience(batch) => {
             let frame = match spool {
@@ -288,13 +270,13 @@ async fn publish(
             match frame {
                 Some(frame) => {
                     report.batches_published += 1;
-                    experience.put(frame).await.map_err(node::NodeError::zenoh)
+                    experience.put(frame).await
                 }
                 None => Ok(()),
             }
         }
-        Out::Episode(episode) => bus.put(&topics::episodes(run, id), &episode).await,
-        Out::Barrier(barrier) => bus.put(&topics::control_barrier(run, id), &barrier).await,
+        Out::Episode(episode) => bus.put(Topic::Episodes { executor_id: id }, &episode).await,
+        Out::Barrier(barrier) => bus.put(Topic::ControlBarrier { executor_id: id }, &barrier).await,
         Out::Progress(progress) => {
             let counts = spool.map(|s| s.counts());
             let stats = stats::report(bus.node(), &progress, &lock(rejects), counts);

@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use agent::ParamSnapshot;
 use node::{Bus, Rejects, Shutdown};
-use proto::{ContentHash, WeightsSnapshot, topics};
+use proto::{ContentHash, Topic, WeightsSnapshot};
 use tokio::sync::watch;
 
 use crate::inbox::Inbox;
@@ -72,24 +72,18 @@ pub(crate) enum FetchError {
 
 /// One `get` of the latest weights.
 async fn fetch_weights(bus: &Bus, timeout: Duration) -> Result<Option<WeightsSnapshot>, FetchError> {
-    query(bus, &topics::params_weights(bus.run()), timeout).await
+    query(bus, Topic::ParamsWeights, timeout).await
 }
 
 /// One `get` on a param-server queryable: its first reply decoded, `None` if nobody replied.
 pub(crate) async fn query<M: proto::Message>(
     bus: &Bus,
-    key: &str,
+    topic: Topic,
     timeout: Duration,
 ) -> Result<Option<M>, FetchError> {
-    let replies =
-        bus.session().get(key).timeout(timeout).await.map_err(|e| FetchError::Unavailable(e.to_string()))?;
-    match replies.recv_async().await {
-        Ok(reply) => match reply.result() {
-            Ok(sample) => proto::decode(&sample.payload().to_bytes()).map(Some).map_err(FetchError::Decode),
-            Err(error) => {
-                Err(FetchError::Unavailable(String::from_utf8_lossy(&error.payload().to_bytes()).into()))
-            }
-        },
-        Err(_) => Ok(None),
+    match bus.query(topic, None, timeout).await.map_err(|e| FetchError::Unavailable(e.to_string()))? {
+        Some(Ok(payload)) => proto::decode(&payload.to_bytes()).map(Some).map_err(FetchError::Decode),
+        Some(Err(error)) => Err(FetchError::Unavailable(error)),
+        None => Ok(None),
     }
 }

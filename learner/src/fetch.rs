@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use node::{Bus, Rejects, Shutdown};
-use proto::{RejectCount, SampleReply, SampleRequest, topics};
+use proto::{RejectCount, SampleReply, SampleRequest, Topic};
 use tokio::sync::mpsc;
 
 use crate::batch::Sampled;
@@ -81,6 +81,12 @@ impl Fetcher {
         self.bad_replies.lock().unwrap_or_else(PoisonError::into_inner).decode_failed("sample_reply", error);
     }
 
+    /// Counts (and rate-limits the log of) an undecodable global-step announcement, beside the bad
+    /// sample replies: both are the learner's rejected inputs.
+    pub fn bad_announcement(&self, error: &proto::DecodeError) {
+        self.bad_replies.lock().unwrap_or_else(PoisonError::into_inner).decode_failed("step", error);
+    }
+
     /// The status now.
     pub fn status(&self) -> FetchStatus {
         let mut status = self.status.lock().unwrap_or_else(PoisonError::into_inner).clone();
@@ -111,7 +117,6 @@ pub struct Requests {
 /// One request loop: ask, wait for the reply (bounded), hand the batch over; until shutdown or the
 /// update thread hangs up.
 pub async fn request_loop(r: Requests, batches: mpsc::Sender<Sampled>, mut shutdown: Shutdown) {
-    let key = topics::replay_sample(r.bus.run());
     loop {
         let request = SampleRequest {
             request_id: r.fetcher.next_request.fetch_add(1, Ordering::Relaxed),
@@ -120,7 +125,7 @@ pub async fn request_loop(r: Requests, batches: mpsc::Sender<Sampled>, mut shutd
         };
         let outcome = tokio::select! {
             _ = shutdown.wait() => return,
-            outcome = ask(&r.bus, &key, &request, r.timeout) => outcome,
+            outcome = ask(&r.bus, &request, r.timeout) => outcome,
         };
         let pause = match outcome {
             Asked::Reply(Ok(SampleReply::Batch(batch))) => {
@@ -174,18 +179,12 @@ enum Asked {
     Silence,
 }
 
-async fn ask(bus: &Bus, key: &str, request: &SampleRequest, timeout: Duration) -> Asked {
-    let get = bus.session().get(key).payload(proto::encode(request)).express(true).timeout(timeout);
-    let replies = match get.await {
-        Ok(replies) => replies,
-        Err(error) => return Asked::Error(error.to_string()),
-    };
-    match replies.recv_async().await {
-        Ok(reply) => match reply.result() {
-            Ok(sample) => Asked::Reply(proto::decode(&sample.payload().to_bytes())),
-            Err(error) => Asked::Error(String::from_utf8_lossy(&error.payload().to_bytes()).into_owned()),
-        },
-        Err(_) => Asked::Silence,
+async fn ask(bus: &Bus, request: &SampleRequest, timeout: Duration) -> Asked {
+    match bus.query(Topic::ReplaySample, Some(proto::encode(request)), timeout).await {
+        Ok(Some(Ok(payload))) => Asked::Reply(proto::decode(&payload.to_bytes())),
+        Ok(Some(Err(error))) => Asked::Error(error),
+        Ok(None) => Asked::Silence,
+        Err(error) => Asked::Error(error.to_string()),
     }
 }
 

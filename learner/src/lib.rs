@@ -142,6 +142,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     drop(batch_tx);
 
     let (mut outbox, matching) = outbox::Outbox::new(bus.clone()).await?;
+    let announcements = bus.subscribe(proto::Topic::ControlStep, node::DEFAULT_QUEUE).await?;
     // Often enough for the param server's notice expiry, and to say "no longer" soon after a batch.
     let mut starved_check = tokio::time::interval(STARVED_AFTER / 4);
     let mut said_starved = false;
@@ -165,6 +166,13 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
             }
             Ok(status) = matching.recv_async() => if status.matching() {
                 outbox.resend_weights().await;
+            },
+            Ok(sample) = announcements.recv() => match proto::decode::<proto::GlobalStep>(&sample.payload().to_bytes()) {
+                Ok(announced) => {
+                    let starved = fetcher.status().starved(node::unix_ms(), STARVED_AFTER);
+                    outbox.on_announcement(announced.weights_version, starved).await;
+                }
+                Err(error) => fetcher.bad_announcement(&error),
             },
             message = out_rx.recv() => match message {
                 Some(message) => outbox.send(message, &fetcher).await,

@@ -1,13 +1,15 @@
 //! Where the update thread's output goes on the bus. The newest weights frame is kept and sent
-//! again whenever a param server starts listening (zenoh's matching status): weights published
-//! before the param server was reachable, or before it restarted, would otherwise be lost, and the
-//! executors would wait for their first weights forever.
+//! again whenever a param server starts listening (zenoh's matching status), and whenever the param
+//! server's announcements still name older weights a second after the newest were sent, or the
+//! learner is starved of data meanwhile (the frame may have been lost on the way): otherwise weights published before the param server was reachable, before
+//! it restarted, or lost in transit would be missing, and executors waiting for their first weights
+//! (with no data, the learner publishes no newer ones) would wait forever.
 
-use node::{Bus, NodeError};
-use proto::{EvalReport, topics};
+use std::time::{Duration, Instant};
+
+use node::{Bus, Delivery, NodeError, Publisher};
+use proto::{EvalReport, Topic};
 use zenoh::bytes::ZBytes;
-use zenoh::pubsub::Publisher;
-use zenoh::qos::CongestionControl;
 
 use crate::{Fetcher, Out, stats};
 
@@ -15,11 +17,22 @@ use crate::{Fetcher, Out, stats};
 pub(crate) type Matching =
     zenoh::matching::MatchingListener<zenoh::handlers::FifoChannelHandler<zenoh::matching::MatchingStatus>>;
 
+/// How long the param server may go on announcing older weights than the newest sent before they
+/// are sent again: announcements made before a frame arrives are normal for a few milliseconds.
+const RESEND_AFTER: Duration = Duration::from_secs(1);
+
+/// The newest weights frame, kept for re-sending.
+struct Latest {
+    frame: ZBytes,
+    version: u64,
+    sent_at: Instant,
+}
+
 /// The learner's publishing side.
 pub(crate) struct Outbox {
     bus: Bus,
-    weights: Publisher<'static>,
-    latest_weights: Option<ZBytes>,
+    weights: Publisher,
+    latest_weights: Option<Latest>,
     /// Evaluations seen so far, for the stats and the role's report.
     pub evaluations: Vec<EvalReport>,
     /// The newest weights version published.
@@ -31,13 +44,8 @@ pub(crate) struct Outbox {
 impl Outbox {
     /// Declares the weights publisher; returns it with the listener of its matching status.
     pub async fn new(bus: Bus) -> Result<(Outbox, Matching), NodeError> {
-        let weights = bus
-            .session()
-            .declare_publisher(topics::params_publish(bus.run()))
-            .congestion_control(CongestionControl::Block)
-            .await
-            .map_err(NodeError::zenoh)?;
-        let matching = weights.matching_listener().await.map_err(NodeError::zenoh)?;
+        let weights = bus.publisher(Topic::ParamsPublish, Delivery::Block).await?;
+        let matching = weights.matching_listener().await?;
         let outbox = Outbox {
             bus,
             weights,
@@ -52,21 +60,21 @@ impl Outbox {
     /// Sends one message of the update thread.
     pub async fn send(&mut self, message: Out, fetcher: &Fetcher) {
         let bus = &self.bus;
-        let run = bus.run();
         let result = match message {
-            Out::Priorities(update) => bus.put(&topics::replay_priorities(run), &update).await,
+            Out::Priorities(update) => bus.put(Topic::ReplayPriorities, &update).await,
             Out::Step(step) => {
                 self.weights_version = step.weights_version;
-                bus.put(&topics::control_learner(run), &step).await
+                bus.put(Topic::ControlLearner, &step).await
             }
             Out::Weights(weights) => {
                 let frame = ZBytes::from(proto::encode(&weights));
-                self.latest_weights = Some(frame.clone());
-                self.weights.put(frame).await.map_err(NodeError::zenoh)
+                let (version, sent_at) = (weights.version, Instant::now());
+                self.latest_weights = Some(Latest { frame: frame.clone(), version, sent_at });
+                self.weights.put(frame).await
             }
             Out::Eval(report) => {
                 self.evaluations.push(report);
-                bus.put(&topics::evaluation(run), &report).await
+                bus.put(Topic::Evaluation, &report).await
             }
             Out::Progress(progress) => {
                 let last_eval = self.evaluations.last().copied();
@@ -80,12 +88,30 @@ impl Outbox {
 
     /// Someone started listening for the weights: send them the newest.
     pub async fn resend_weights(&mut self) {
-        if let Some(frame) = &self.latest_weights {
-            self.weights_resent += 1;
-            tracing::info!(version = self.weights_version, "a param server is listening: weights sent again");
-            if let Err(error) = self.weights.put(frame.clone()).await {
-                tracing::warn!(%error, "weights not re-sent");
-            }
+        self.send_latest_again("a param server is listening").await;
+    }
+
+    /// The param server announced that it holds weights `held`: if that is older than the newest sent
+    /// a while ago, the frame was lost on the way; send it again. While the learner is starved of data
+    /// the newest are sent again even when `held` equals their version: an announcement cannot tell
+    /// "holds version 0" from "holds nothing", and executors waiting for their first weights are what
+    /// starves it (the param server ignores a repeat, counted).
+    pub async fn on_announcement(&mut self, held: u64, starved: bool) {
+        let lost = self.latest_weights.as_ref().is_some_and(|l| {
+            (held < l.version || (starved && held == l.version)) && l.sent_at.elapsed() >= RESEND_AFTER
+        });
+        if lost {
+            self.send_latest_again("the param server announces older weights").await;
+        }
+    }
+
+    async fn send_latest_again(&mut self, why: &str) {
+        let Some(latest) = &mut self.latest_weights else { return };
+        self.weights_resent += 1;
+        latest.sent_at = Instant::now();
+        tracing::info!(version = latest.version, why, "weights sent again");
+        if let Err(error) = self.weights.put(latest.frame.clone()).await {
+            tracing::warn!(%error, "weights not re-sent");
         }
     }
 }

@@ -43,8 +43,8 @@ use std::time::{Duration, Instant};
 pub use barrier::{Barrier, BarrierRule};
 pub use body::{BadBody, Schema, check_body};
 pub use config::ParamServerConfig;
-use node::{Bus, Shutdown};
-use proto::{Role, Topic, topics};
+use node::{Bus, Delivery, Shutdown};
+use proto::{Role, Topic, TopicSet, topics};
 pub use starvation::{REFILL_AFTER, StarvationWatch};
 pub use state::{State, StateCounts};
 pub use step_guard::{DEFAULT_MAX_LEARNER_STEPS_PER_S, Implausible, StepGuard};
@@ -69,24 +69,18 @@ pub struct Report {
 /// Runs the param-server until `shutdown` fires.
 pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) -> anyhow::Result<Report> {
     let started = Instant::now();
-    let session = bus.session().clone();
     let run = bus.run().clone();
-    let z = node::NodeError::zenoh;
-    let publish_sub = session.declare_subscriber(topics::params_publish(&run)).await.map_err(z)?;
-    let learner_sub = session.declare_subscriber(topics::control_learner(&run)).await.map_err(z)?;
-    let barrier_sub = session.declare_subscriber(topics::control_barrier_all(&run)).await.map_err(z)?;
-    let live_sub = session
-        .liveliness()
-        .declare_subscriber(topics::liveliness_role(&run, Role::Executor))
-        .history(true)
-        .await
-        .map_err(z)?;
+    let queue = node::DEFAULT_QUEUE;
+    let publish_sub = bus.subscribe(Topic::ParamsPublish, queue).await?;
+    let learner_sub = bus.subscribe(Topic::ControlLearner, queue).await?;
+    let barrier_sub = bus.subscribe(TopicSet::Barriers, queue).await?;
+    let live_sub = bus.watch(Role::Executor).await?;
     let weights_key = topics::params_weights(&run);
-    let queryable = session.declare_queryable(&weights_key).await.map_err(z)?;
+    let queryable = bus.queryable(Topic::ParamsWeights, queue).await?;
     let frozen_key = topics::params_frozen(&run);
-    let frozen_queryable = session.declare_queryable(&frozen_key).await.map_err(z)?;
+    let frozen_queryable = bus.queryable(Topic::ParamsFrozen, queue).await?;
     let frozen = frozen_levels(&config.hierarchy)?;
-    let step_pub = session.declare_publisher(topics::control_step(&run)).express(true).await.map_err(z)?;
+    let step_pub = bus.publisher(Topic::ControlStep, Delivery::Express).await?;
     // Declared last: seeing the token means every input above is in place.
     let _alive = bus.announce().await?;
     tracing::info!(rule = ?config.rule(), "param-server up");
@@ -113,7 +107,7 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
     loop {
         let changed = tokio::select! {
             _ = shutdown.wait() => break,
-            Ok(sample) = publish_sub.recv_async() => {
+            Ok(sample) = publish_sub.recv() => {
                 let accepted = state.on_weights(&sample.payload().to_bytes());
                 if accepted {
                     // The received frame is exactly what the queryable serves: keep it, no re-encode.
@@ -121,8 +115,8 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
                 }
                 accepted
             }
-            Ok(sample) = learner_sub.recv_async() => state.on_learner_step(&sample.payload().to_bytes()),
-            Ok(sample) = barrier_sub.recv_async() => {
+            Ok(sample) = learner_sub.recv() => state.on_learner_step(&sample.payload().to_bytes()),
+            Ok(sample) = barrier_sub.recv() => {
                 let id = match Topic::parse(&run, sample.key_expr().as_str()) {
                     Ok(Topic::ControlBarrier { executor_id }) => Some(executor_id),
                     _ => None,
@@ -130,13 +124,13 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
                 state.on_barrier_report(id, &sample.payload().to_bytes());
                 false
             }
-            Ok(sample) = live_sub.recv_async() => match Topic::parse(&run, sample.key_expr().as_str()) {
+            Ok(sample) = live_sub.recv() => match Topic::parse(&run, sample.key_expr().as_str()) {
                 Ok(Topic::Liveliness(node)) if node.role == Role::Executor => {
                     state.on_liveliness(node.id, sample.kind() == SampleKind::Put)
                 }
                 _ => false,
             },
-            Ok(query) = queryable.recv_async() => {
+            Ok(query) = queryable.recv() => {
                 let reply = match &latest {
                     Some(bytes) => query.reply(&weights_key, bytes.clone()).express(true).await,
                     None => query.reply_err("no weights published yet").await,
@@ -147,7 +141,7 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
                 state.served();
                 false
             }
-            Ok(query) = frozen_queryable.recv_async() => {
+            Ok(query) = frozen_queryable.recv() => {
                 let reply = match &frozen_reply {
                     Some(bytes) => query.reply(&frozen_key, bytes.clone()).await,
                     None => query.reply_err("this run has no [hierarchy]: no frozen levels").await,
@@ -170,7 +164,7 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
         };
         if changed {
             let step = state.announcement();
-            if let Err(error) = step_pub.put(proto::encode(&step)).await {
+            if let Err(error) = step_pub.put_message(&step).await {
                 tracing::debug!(%error, "announcement not published");
             }
         }

@@ -80,4 +80,4 @@ pub use sampling::{
     SampleReply, SampleRequest, SampledBatch,
 };
 pub use stats::{BlockedReason, EpisodeReport, Metric, RejectCount, StatsReport};
-pub use topics::{NodeId, Role, RunId, Topic};
+pub use topics::{NodeId, Role, RunId, Topic, TopicSet};

@@ -125,6 +125,9 @@ pub enum Topic {
     ReplayPriorities,
     /// `replay/durable`: [`crate::DurableMarks`], replay server → executors.
     ReplayDurable,
+    /// `replay/state` (`?k=N`): queryable; the replay server replies with a [`crate::StatsReport`] of
+    /// its state and top-k priorities.
+    ReplayState,
     /// `params/weights`: [`crate::WeightsSnapshot`] from the param server, and its latest-value queryable.
     ParamsWeights,
     /// `params/publish`: [`crate::WeightsSnapshot`], learner → param server.
@@ -161,6 +164,7 @@ impl Topic {
             Topic::ReplaySample => "replay/sample".to_string(),
             Topic::ReplayPriorities => "replay/priorities".to_string(),
             Topic::ReplayDurable => "replay/durable".to_string(),
+            Topic::ReplayState => "replay/state".to_string(),
             Topic::ParamsWeights => "params/weights".to_string(),
             Topic::ParamsPublish => "params/publish".to_string(),
             Topic::ParamsFrozen => "params/frozen".to_string(),
@@ -185,6 +189,7 @@ impl Topic {
             ["replay", "sample"] => Topic::ReplaySample,
             ["replay", "priorities"] => Topic::ReplayPriorities,
             ["replay", "durable"] => Topic::ReplayDurable,
+            ["replay", "state"] => Topic::ReplayState,
             ["params", "weights"] => Topic::ParamsWeights,
             ["params", "publish"] => Topic::ParamsPublish,
             ["params", "frozen"] => Topic::ParamsFrozen,
@@ -198,6 +203,52 @@ impl Topic {
             _ => return Err(unknown()),
         };
         Ok(topic)
+    }
+}
+
+/// What a subscriber or queryable listens on: one topic, or every process's topic of one family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum TopicSet {
+    /// Exactly this topic.
+    One(Topic),
+    /// `experience/*`: every executor's batches.
+    Experience,
+    /// `control/barrier/*`: every executor's barrier reports.
+    Barriers,
+    /// `episodes/*`: every executor's finished episodes.
+    Episodes,
+    /// `liveliness/<role>/*`: the tokens of every process in a role.
+    Liveliness(Role),
+}
+
+impl TopicSet {
+    /// The key expression to declare in `run`.
+    pub fn key(&self, run: &RunId) -> String {
+        match self {
+            TopicSet::One(topic) => topic.key(run),
+            TopicSet::Experience => experience_all(run),
+            TopicSet::Barriers => control_barrier_all(run),
+            TopicSet::Episodes => episodes_all(run),
+            TopicSet::Liveliness(role) => liveliness_role(run, *role),
+        }
+    }
+
+    /// Whether `topic` is in the set.
+    pub fn contains(&self, topic: &Topic) -> bool {
+        match (self, topic) {
+            (TopicSet::One(one), topic) => one == topic,
+            (TopicSet::Experience, Topic::Experience { .. })
+            | (TopicSet::Barriers, Topic::ControlBarrier { .. })
+            | (TopicSet::Episodes, Topic::Episodes { .. }) => true,
+            (TopicSet::Liveliness(role), Topic::Liveliness(node)) => node.role == *role,
+            _ => false,
+        }
+    }
+}
+
+impl From<Topic> for TopicSet {
+    fn from(topic: Topic) -> TopicSet {
+        TopicSet::One(topic)
     }
 }
 
@@ -374,6 +425,38 @@ mod tests {
     }
 
     #[test]
+    fn a_topic_set_contains_what_its_key_matches() {
+        let r = run();
+        let cases = [
+            (TopicSet::Experience, Topic::Experience { executor_id: 4 }, true),
+            (TopicSet::Experience, Topic::Episodes { executor_id: 4 }, false),
+            (TopicSet::Barriers, Topic::ControlBarrier { executor_id: 0 }, true),
+            (TopicSet::Episodes, Topic::Episodes { executor_id: 9 }, true),
+            (
+                TopicSet::Liveliness(Role::Replay),
+                Topic::Liveliness(NodeId { role: Role::Replay, id: 0 }),
+                true,
+            ),
+            (
+                TopicSet::Liveliness(Role::Replay),
+                Topic::Liveliness(NodeId { role: Role::Param, id: 0 }),
+                false,
+            ),
+            (TopicSet::One(Topic::ControlStep), Topic::ControlStep, true),
+            (TopicSet::One(Topic::ControlStep), Topic::ControlLearner, false),
+        ];
+        for (set, topic, inside) in cases {
+            assert_eq!(set.contains(&topic), inside, "{set:?} {topic:?}");
+            // The key expression agrees: a concrete key is in the set exactly when the wildcard's
+            // prefix (before `*`) starts it and it has the same number of chunks.
+            let (key, pattern) = (topic.key(&r), set.key(&r));
+            let stem = pattern.trim_end_matches('*');
+            let same_depth = key.split('/').count() == pattern.split('/').count();
+            assert_eq!(key.starts_with(stem) && same_depth, inside, "{pattern} vs {key}");
+        }
+    }
+
+    #[test]
     fn parse_inverts_key_for_every_topic() {
         let r = run();
         let mut topics = vec![
@@ -382,6 +465,7 @@ mod tests {
             Topic::ReplaySample,
             Topic::ReplayPriorities,
             Topic::ReplayDurable,
+            Topic::ReplayState,
             Topic::ParamsWeights,
             Topic::ParamsPublish,
             Topic::ParamsFrozen,

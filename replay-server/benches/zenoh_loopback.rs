@@ -296,7 +296,7 @@ async fn run_phase(phase: &Phase) -> anyhow::Result<()> {
                             slots: batch.slots,
                             generations: batch.generations,
                         };
-                        if bus.put(&topics::replay_priorities(bus.run()), &update).await.is_err() {
+                        if bus.put(proto::Topic::ReplayPriorities, &update).await.is_err() {
                             break;
                         }
                     }

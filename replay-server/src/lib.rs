@@ -14,8 +14,7 @@
 //! | `stats/replay/<id>`     | out       | `StatsReport` every `stats_interval_ms`             |
 //! | `liveliness/replay/<id>`| token     | declared once every input is declared (readiness)  |
 //!
-//! `replay/state` is not (yet) in `proto`'s topic table; its reply reuses `StatsReport` so that any
-//! client decodes it with `proto::decode`.
+//! `replay/state`'s reply reuses `StatsReport` so that any client decodes it with `proto::decode`.
 //!
 //! # Layout
 //!
@@ -88,7 +87,7 @@ use crate::snapshot::FileWriter;
 
 /// `rl/<run>/replay/state`: the state and top-k queryable.
 pub fn state_key(run: &proto::RunId) -> String {
-    format!("{}/replay/state", proto::topics::prefix(run))
+    proto::Topic::ReplayState.key(run)
 }
 
 /// Snapshot figures of one run of the server.

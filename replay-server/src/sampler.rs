@@ -10,10 +10,10 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
+use node::Queryable;
 use node::Shutdown;
 use proto::{RefusalReason, SampleRefusal, SampleReply};
-use zenoh::handlers::FifoChannelHandler;
-use zenoh::query::{Query, Queryable};
+use zenoh::query::Query;
 
 use crate::config::MAX_TOP_K;
 use crate::limiter::Blocked;
@@ -23,7 +23,7 @@ use crate::server::{Ctx, scan, unix_ms_of};
 use crate::service::{SampleOutcome, Waiting};
 use crate::stats::Rates;
 
-type QueryQueue = Queryable<FifoChannelHandler<Query>>;
+type QueryQueue = Queryable;
 
 /// Far enough ahead to mean "no deadline" for `sleep_until`.
 const IDLE: Duration = Duration::from_secs(3600);
@@ -40,7 +40,7 @@ pub(crate) async fn sample_loop(
         tokio::select! {
             biased;
             _ = shutdown.wait() => break,
-            received = queries.recv_async() => match received {
+            received = queries.recv() => match received {
                 Ok(query) => on_query(&ctx, &mut pending, query).await,
                 Err(_) => break,
             },
@@ -172,7 +172,7 @@ pub(crate) async fn state_loop(
         let query = tokio::select! {
             biased;
             _ = shutdown.wait() => break,
-            received = queries.recv_async() => match received {
+            received = queries.recv() => match received {
                 Ok(query) => query,
                 Err(_) => break,
             },

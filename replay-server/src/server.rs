@@ -7,13 +7,11 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, anyhow};
-use node::{Bus, Shutdown, unix_ms};
-use proto::{DurableMarks, ExperienceBatch, PriorityUpdate, StatsReport, topics};
+use anyhow::Context;
+use node::{Bus, Shutdown, Subscriber, unix_ms};
+use proto::{DurableMarks, ExperienceBatch, PriorityUpdate, StatsReport, Topic, TopicSet};
 use tokio::sync::Notify;
 use tokio::task::JoinSet;
-use zenoh::handlers::{FifoChannel, FifoChannelHandler};
-use zenoh::pubsub::Subscriber;
 use zenoh::sample::Sample;
 
 use crate::config::ReplayServerConfig;
@@ -71,7 +69,7 @@ impl Ctx {
     pub async fn publish_durable(&self) {
         let marks = self.durable.lock().unwrap_or_else(PoisonError::into_inner).clone();
         let Some(marks) = marks else { return };
-        if let Err(e) = self.bus.put(&topics::replay_durable(self.bus.run()), &marks).await {
+        if let Err(e) = self.bus.put(Topic::ReplayDurable, &marks).await {
             tracing::warn!(error = %e, "could not publish the durable marks");
         }
     }
@@ -108,30 +106,13 @@ pub(crate) async fn start(
     ctx: &Arc<Ctx>,
     shutdown: &Shutdown,
 ) -> anyhow::Result<JoinSet<anyhow::Result<()>>> {
-    let session = ctx.bus.session();
-    let run = ctx.bus.run();
+    let bus = &ctx.bus;
     let queue = ctx.cfg.subscriber_queue_messages as usize;
-    let zenoh_err = |what: &'static str| move |e: zenoh::Error| anyhow!("declaring {what}: {e}");
-    let experience = session
-        .declare_subscriber(topics::experience_all(run))
-        .with(FifoChannel::new(queue))
-        .await
-        .map_err(zenoh_err("the experience subscriber"))?;
-    let priorities = session
-        .declare_subscriber(topics::replay_priorities(run))
-        .with(FifoChannel::new(queue))
-        .await
-        .map_err(zenoh_err("the priority subscriber"))?;
-    let sample = session
-        .declare_queryable(topics::replay_sample(run))
-        .with(FifoChannel::new(queue))
-        .await
-        .map_err(zenoh_err("the sample queryable"))?;
-    let state = session
-        .declare_queryable(crate::state_key(run))
-        .with(FifoChannel::new(16))
-        .await
-        .map_err(zenoh_err("the state queryable"))?;
+    let experience = bus.subscribe(TopicSet::Experience, queue).await.context("the experience subscriber")?;
+    let priorities =
+        bus.subscribe(Topic::ReplayPriorities, queue).await.context("the priority subscriber")?;
+    let sample = bus.queryable(Topic::ReplaySample, queue).await.context("the sample queryable")?;
+    let state = bus.queryable(Topic::ReplayState, 16).await.context("the state queryable")?;
     let mut tasks = JoinSet::new();
     tasks.spawn(experience_loop(Arc::clone(ctx), experience, shutdown.clone()));
     tasks.spawn(priority_loop(Arc::clone(ctx), priorities, shutdown.clone()));
@@ -144,18 +125,16 @@ pub(crate) async fn start(
     Ok(tasks)
 }
 
-type SampleSubscriber = Subscriber<FifoChannelHandler<Sample>>;
-
 /// The next received sample, or `None` once shutdown fires or the subscriber closes.
-async fn next_sample(sub: &SampleSubscriber, shutdown: &mut Shutdown) -> Option<Sample> {
+async fn next_sample(sub: &Subscriber, shutdown: &mut Shutdown) -> Option<Sample> {
     tokio::select! {
         biased;
         _ = shutdown.wait() => None,
-        received = sub.recv_async() => received.ok(),
+        received = sub.recv() => received.ok(),
     }
 }
 
-async fn experience_loop(ctx: Arc<Ctx>, sub: SampleSubscriber, mut shutdown: Shutdown) -> anyhow::Result<()> {
+async fn experience_loop(ctx: Arc<Ctx>, sub: Subscriber, mut shutdown: Shutdown) -> anyhow::Result<()> {
     loop {
         let Some(sample) = next_sample(&sub, &mut shutdown).await else { break };
         let payload = sample.payload().to_bytes();
@@ -193,7 +172,7 @@ async fn wait_for_replica(ctx: &Ctx, shutdown: &mut Shutdown) {
     service.add_blocked_ms("insert_replica_behind", since.elapsed().as_millis() as u64);
 }
 
-async fn priority_loop(ctx: Arc<Ctx>, sub: SampleSubscriber, mut shutdown: Shutdown) -> anyhow::Result<()> {
+async fn priority_loop(ctx: Arc<Ctx>, sub: Subscriber, mut shutdown: Shutdown) -> anyhow::Result<()> {
     loop {
         let Some(sample) = next_sample(&sub, &mut shutdown).await else { break };
         let decoded = proto::decode::<PriorityUpdate>(&sample.payload().to_bytes());
@@ -230,7 +209,6 @@ pub(crate) async fn scan<R>(
 }
 
 async fn stats_loop(ctx: Arc<Ctx>, mut shutdown: Shutdown) -> anyhow::Result<()> {
-    let key = topics::stats(ctx.bus.run(), ctx.bus.node());
     let period = Duration::from_millis(ctx.cfg.stats_interval_ms);
     let mut ticks = tokio::time::interval_at(tokio::time::Instant::now() + period, period);
     ticks.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -251,7 +229,7 @@ async fn stats_loop(ctx: Arc<Ctx>, mut shutdown: Shutdown) -> anyhow::Result<()>
             report
         })
         .await;
-        if let Err(e) = ctx.bus.put(&key, &report).await {
+        if let Err(e) = ctx.bus.put_stats(&report).await {
             tracing::warn!(error = %e, "could not publish stats");
         }
         // Every interval, not only when a snapshot lands: a restarted executor learns the marks

@@ -39,7 +39,7 @@ async fn publisher_and_sampler_get_exact_batches_and_stats() {
         generations: batch.generations.clone(),
         td_errors: vec![50.0; batch.len()],
     };
-    client.bus.put(&topics::replay_priorities(&server.run), &update).await.expect("put priorities");
+    client.bus.put(proto::Topic::ReplayPriorities, &update).await.expect("put priorities");
     let state = client
         .wait_state("the priority update", |s| metric(s, "replay/priority_updates_applied_total") == 128.0)
         .await;
@@ -227,7 +227,7 @@ async fn graceful_restart_restores_contents_priorities_and_counters() {
         generations: batch.generations.clone(),
         td_errors: (0..64).map(|i| i as f32).collect(),
     };
-    client.bus.put(&topics::replay_priorities(&server.run), &update).await.expect("put");
+    client.bus.put(proto::Topic::ReplayPriorities, &update).await.expect("put");
     let before = client
         .wait_state("inserts, update and rejection", |s| {
             metric(s, "replay/priority_updates_applied_total") == 64.0
@@ -312,7 +312,7 @@ async fn killed_process_restarts_from_its_periodic_snapshot() {
         generations: batch.generations.clone(),
         td_errors: vec![9.0; 100],
     };
-    client.bus.put(&topics::replay_priorities(&run), &update).await.expect("put");
+    client.bus.put(proto::Topic::ReplayPriorities, &update).await.expect("put");
     let before = client
         .wait_state("500 transitions and the update", |s| {
             metric(s, "replay/size_transitions") == 500.0

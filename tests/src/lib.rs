@@ -14,13 +14,13 @@
 
 pub mod audit;
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::future::Future;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow, bail};
-use node::{Bus, BusConfig, RoleConfig, Shutdown, ShutdownTrigger};
+use node::{Bus, BusConfig, Faults, RoleConfig, Shutdown, ShutdownTrigger};
 use proto::{GlobalStep, LearnerStep, Message, NodeId, Role, RunId, topics};
 use tokio::task::JoinHandle;
 
@@ -117,32 +117,63 @@ pub struct Cluster {
     config: String,
     /// A session of the harness's own, for watching the run's topics.
     pub observer: Bus,
+    /// Every process's fault rules.
+    pub network: Network,
     replay: Running<replay_server::Report>,
     param: Running<param_server::Report>,
     learner: Running<learner::Report>,
     executors: BTreeMap<u32, Running<executor::Report>>,
 }
 
-async fn open(run: &RunId, role: Role, id: u32, config: &BusConfig) -> Result<Bus> {
-    Bus::open(run.clone(), NodeId { role, id }, config).await.with_context(|| format!("opening {role} {id}"))
+/// The fault rules of every process of a cluster, by node: a test installs rules on a node's
+/// [`Faults`] (before [`Cluster::start_with`], or while it runs) to drop, delay or cut its messages per
+/// topic; a restarted role keeps its node's rules.
+#[derive(Debug, Clone, Default)]
+pub struct Network {
+    by_node: Arc<Mutex<HashMap<NodeId, Faults>>>,
+}
+
+impl Network {
+    /// `node`'s rules (empty until some are added).
+    pub fn faults(&self, node: NodeId) -> Faults {
+        self.by_node.lock().unwrap_or_else(PoisonError::into_inner).entry(node).or_default().clone()
+    }
+
+    /// The rules of `role`'s process `id`.
+    pub fn of(&self, role: Role, id: u32) -> Faults {
+        self.faults(NodeId { role, id })
+    }
+
+    async fn open(&self, run: &RunId, role: Role, id: u32, config: &BusConfig) -> Result<Bus> {
+        let node = NodeId { role, id };
+        let bus =
+            Bus::open(run.clone(), node, config).await.with_context(|| format!("opening {role} {id}"))?;
+        Ok(bus.with_faults(self.faults(node)))
+    }
 }
 
 impl Cluster {
     /// Starts the replay server, param server, learner and `spec.executors` executors; returns once
     /// each has declared its liveliness token.
     pub async fn start(spec: Spec) -> Result<Cluster> {
+        Self::start_with(spec, Network::default()).await
+    }
+
+    /// [`Cluster::start`] with the fault rules of `network` (some may be installed already, to act
+    /// from the first message).
+    pub async fn start_with(spec: Spec, network: Network) -> Result<Cluster> {
         let run = RunId::new(spec.run_id.clone())?;
         let endpoint = format!("tcp/127.0.0.1:{}", node::free_loopback_port()?);
         let server = BusConfig { listen: vec![endpoint.clone()], ..BusConfig::default() };
         let peer = BusConfig::loopback(vec![endpoint.clone()]);
-        let replay_bus = open(&run, Role::Replay, 0, &server).await?;
+        let replay_bus = network.open(&run, Role::Replay, 0, &server).await?;
         let replay_config = role_config(&spec.config)?;
         let replay = spawn(|s| replay_server::run(replay_config, replay_bus, s));
-        let observer = open(&run, Role::Learner, 9999, &peer).await?;
-        let param_bus = open(&run, Role::Param, 0, &peer).await?;
+        let observer = network.open(&run, Role::Learner, 9999, &peer).await?;
+        let param_bus = network.open(&run, Role::Param, 0, &peer).await?;
         let param_config = role_config(&spec.config)?;
         let param = spawn(|s| param_server::run(param_config, param_bus, s));
-        let learner_bus = open(&run, Role::Learner, 0, &peer).await?;
+        let learner_bus = network.open(&run, Role::Learner, 0, &peer).await?;
         let learner_config = role_config(&spec.config)?;
         let learner = spawn(|s| learner::run(learner_config, learner_bus, s));
         let mut cluster = Cluster {
@@ -150,6 +181,7 @@ impl Cluster {
             endpoint,
             config: spec.config,
             observer,
+            network,
             replay,
             param,
             learner,
@@ -174,8 +206,10 @@ impl Cluster {
         if self.executors.contains_key(&id) {
             bail!("executor {id} is already running");
         }
-        let bus =
-            open(&self.run, Role::Executor, id, &BusConfig::loopback(vec![self.endpoint.clone()])).await?;
+        let bus = self
+            .network
+            .open(&self.run, Role::Executor, id, &BusConfig::loopback(vec![self.endpoint.clone()]))
+            .await?;
         let config = role_config(&self.config)?;
         let running = spawn(|s| executor::run(config, bus, s));
         self.executors.insert(id, running);
@@ -190,8 +224,10 @@ impl Cluster {
         self.learner.trigger.fire();
         let stopped = within("the old learner to stop", WAIT, &mut self.learner.task).await?;
         let report = stopped.context("the old learner panicked")??;
-        let bus =
-            open(&self.run, Role::Learner, 0, &BusConfig::loopback(vec![self.endpoint.clone()])).await?;
+        let bus = self
+            .network
+            .open(&self.run, Role::Learner, 0, &BusConfig::loopback(vec![self.endpoint.clone()]))
+            .await?;
         let config = role_config(&self.config)?;
         self.learner = spawn(|s| learner::run(config, bus, s));
         self.wait_alive(NodeId { role: Role::Learner, id: 0 }).await?;
@@ -227,7 +263,7 @@ impl Cluster {
         // little longer, as a crashed process's socket would.
         let bus = within("the replay server's port to be free", WAIT, async {
             loop {
-                match open(&self.run, Role::Replay, 0, &server).await {
+                match self.network.open(&self.run, Role::Replay, 0, &server).await {
                     Err(e) if format!("{e:#}").contains("Address already in use") => {
                         tokio::time::sleep(Duration::from_millis(50)).await;
                     }
