@@ -35,7 +35,8 @@ struct Gate<T> {
 }
 
 /// A received message's key.
-trait Keyed {
+pub trait Keyed {
+    /// The key it arrived on.
     fn key(&self) -> &str;
 }
 
@@ -136,56 +137,36 @@ impl Publisher {
     }
 }
 
+/// Messages of type `T` arriving on a zenoh declaration `D` (a subscriber or a queryable, kept
+/// declared while this lives), each passing the process's faults.
+pub struct Incoming<D, T> {
+    inner: D,
+    gate: Gate<T>,
+}
+
 /// A subscriber of a topic set (or of liveliness tokens).
-pub struct Subscriber {
-    inner: zenoh::pubsub::Subscriber<FifoChannelHandler<Sample>>,
-    gate: Gate<Sample>,
-}
-
-impl std::fmt::Debug for Subscriber {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Subscriber").field("key", &self.inner.key_expr().as_str()).finish()
-    }
-}
-
-impl Subscriber {
-    pub(crate) fn new(
-        inner: zenoh::pubsub::Subscriber<FifoChannelHandler<Sample>>,
-        faults: Faults,
-        run: RunId,
-    ) -> Self {
-        Self { inner, gate: Gate::new(faults, run) }
-    }
-
-    /// The next sample; an error once the subscriber is closed. Cancel-safe.
-    pub async fn recv(&self) -> Result<Sample, NodeError> {
-        self.gate.next(|| self.inner.recv_async()).await
-    }
-}
+pub type Subscriber = Incoming<zenoh::pubsub::Subscriber<FifoChannelHandler<Sample>>, Sample>;
 
 /// A queryable of one topic.
-pub struct Queryable {
-    inner: zenoh::query::Queryable<FifoChannelHandler<Query>>,
-    gate: Gate<Query>,
-}
+pub type Queryable = Incoming<zenoh::query::Queryable<FifoChannelHandler<Query>>, Query>;
 
-impl std::fmt::Debug for Queryable {
+impl<D, T> std::fmt::Debug for Incoming<D, T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Queryable").field("key", &self.inner.key_expr().as_str()).finish()
+        f.debug_struct("Incoming").field("of", &std::any::type_name::<T>()).finish()
     }
 }
 
-impl Queryable {
-    pub(crate) fn new(
-        inner: zenoh::query::Queryable<FifoChannelHandler<Query>>,
-        faults: Faults,
-        run: RunId,
-    ) -> Self {
+impl<D, T> Incoming<D, T>
+where
+    D: std::ops::Deref<Target = FifoChannelHandler<T>>,
+    T: Keyed + Send + 'static,
+{
+    pub(crate) fn new(inner: D, faults: Faults, run: RunId) -> Self {
         Self { inner, gate: Gate::new(faults, run) }
     }
 
-    /// The next query; an error once the queryable is closed. Cancel-safe.
-    pub async fn recv(&self) -> Result<Query, NodeError> {
+    /// The next message; an error once the declaration is closed. Cancel-safe.
+    pub async fn recv(&self) -> Result<T, NodeError> {
         self.gate.next(|| self.inner.recv_async()).await
     }
 }

@@ -25,7 +25,7 @@ pub use args::{BusConfig, NodeArgs, ZenohMode};
 pub use bus::{Bus, DEFAULT_QUEUE, decode_payload};
 pub use clock::unix_ms;
 pub use config::{HierarchyKeys, RoleConfig, RunKeys};
-pub use endpoints::{Delivery, Publisher, Queryable, Subscriber};
+pub use endpoints::{Delivery, Incoming, Keyed, Publisher, Queryable, Subscriber};
 pub use error::NodeError;
 pub use faults::{Direction, Fault, Faults};
 pub use launch::{launch, main};

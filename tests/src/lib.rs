@@ -49,6 +49,21 @@ impl Spec {
         let config = include_str!("../../deploy/configs/tiny.toml");
         Spec { run_id: run_id.into(), executors, config: config.into() }
     }
+
+    /// [`Spec::tiny`] with durable experience under `dir`: the replay server snapshots every second
+    /// to `dir/replay.snap` (with a replica log small enough for the tiny memory budget) and executors
+    /// spool into `dir/spool`, which is returned for the audit.
+    pub fn tiny_durable(run_id: &str, executors: u32, dir: &std::path::Path) -> (Spec, std::path::PathBuf) {
+        let mut spec = Spec::tiny(run_id, executors);
+        let (snapshot, spools) = (dir.join("replay.snap"), dir.join("spool"));
+        let replay = format!(
+            "[replay_server]\nsnapshot_path = {:?}\nsnapshot_interval_s = 1\nsnapshot_log_budget_bytes = 16777216\n",
+            snapshot.display().to_string()
+        );
+        let executor = format!("[executor]\nspool_dir = {:?}\n", spools.display().to_string());
+        spec.config = spec.config.replace("[replay_server]\n", &replay).replace("[executor]\n", &executor);
+        (spec, spools)
+    }
 }
 
 /// Parses and validates role config `C` from a run file's text.

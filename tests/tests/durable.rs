@@ -10,15 +10,7 @@ use proto::{DurableMarks, topics};
 async fn a_killed_replay_server_loses_no_transition() -> anyhow::Result<()> {
     let dir = std::env::temp_dir().join(format!("durable-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let (snapshot, spools) = (dir.join("replay.snap"), dir.join("spool"));
-    let mut spec = Spec::tiny("cluster-durable", 2);
-    spec.config = spec
-        .config
-        .replace(
-            "[replay_server]\n",
-            &format!("[replay_server]\nsnapshot_path = {:?}\nsnapshot_interval_s = 1\nsnapshot_log_budget_bytes = 16777216\n", snapshot.display().to_string()),
-        )
-        .replace("[executor]\n", &format!("[executor]\nspool_dir = {:?}\n", spools.display().to_string()));
+    let (spec, spools) = Spec::tiny_durable("cluster-durable", 2, &dir);
     let mut cluster = Cluster::start(spec).await?;
     let marks = cluster.collect::<DurableMarks>(&topics::replay_durable(cluster.run())).await?;
     cluster.wait_for_learner_step(100).await?;

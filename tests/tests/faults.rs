@@ -70,18 +70,7 @@ async fn a_late_report_from_a_dead_executor_does_not_revive_it() -> anyhow::Resu
 async fn a_lost_experience_batch_is_sent_again() -> anyhow::Result<()> {
     let dir = std::env::temp_dir().join(format!("faults-batch-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let (snapshot, spools) = (dir.join("replay.snap"), dir.join("spool"));
-    let mut spec = Spec::tiny("faults-batch", 2);
-    spec.config = spec
-        .config
-        .replace(
-            "[replay_server]\n",
-            &format!(
-                "[replay_server]\nsnapshot_path = {:?}\nsnapshot_interval_s = 1\nsnapshot_log_budget_bytes = 16777216\n",
-                snapshot.display().to_string()
-            ),
-        )
-        .replace("[executor]\n", &format!("[executor]\nspool_dir = {:?}\n", spools.display().to_string()));
+    let (spec, spools) = Spec::tiny_durable("faults-batch", 2, &dir);
     let network = Network::default();
     let replay = network.of(Role::Replay, 0);
     // The fifth batch executor 0 sends (seq 4) never arrives.
