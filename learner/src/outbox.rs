@@ -26,6 +26,9 @@ struct Latest {
     frame: ZBytes,
     version: u64,
     sent_at: Instant,
+    /// Times sent again: logged at info the first time only (a starved learner re-sends every
+    /// second), counted in the report.
+    resent: u64,
 }
 
 /// The learner's publishing side.
@@ -69,7 +72,7 @@ impl Outbox {
             Out::Weights(weights) => {
                 let frame = ZBytes::from(proto::encode(&weights));
                 let (version, sent_at) = (weights.version, Instant::now());
-                self.latest_weights = Some(Latest { frame: frame.clone(), version, sent_at });
+                self.latest_weights = Some(Latest { frame: frame.clone(), version, sent_at, resent: 0 });
                 self.weights.put(frame).await
             }
             Out::Eval(report) => {
@@ -109,7 +112,12 @@ impl Outbox {
         let Some(latest) = &mut self.latest_weights else { return };
         self.weights_resent += 1;
         latest.sent_at = Instant::now();
-        tracing::info!(version = latest.version, why, "weights sent again");
+        latest.resent += 1;
+        if latest.resent == 1 {
+            tracing::info!(version = latest.version, why, "weights sent again");
+        } else {
+            tracing::debug!(version = latest.version, why, times = latest.resent, "weights sent again");
+        }
         if let Err(error) = self.weights.put(latest.frame.clone()).await {
             tracing::warn!(%error, "weights not re-sent");
         }
