@@ -8,8 +8,8 @@ use zenoh::handlers::FifoChannel;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::qos::CongestionControl;
 
-use crate::endpoints::{Delivery, Publisher, Queryable, Subscriber};
-use crate::faults::{Direction, Faults, Verdict};
+use crate::endpoints::{Delivery, Publisher, Queryable, Subscriber, let_out};
+use crate::faults::Faults;
 use crate::{BusConfig, NodeError};
 
 /// Messages a subscriber or queryable holds before zenoh drops (zenoh's own default).
@@ -69,22 +69,10 @@ impl Bus {
         self.node
     }
 
-    /// Whether an outgoing message on `topic` goes now (after a delay a rule asks for), or is lost.
-    async fn send_verdict(&self, topic: Topic) -> bool {
-        match self.faults.verdict(Direction::Out, || Some(topic)) {
-            Verdict::Pass => true,
-            Verdict::Drop => false,
-            Verdict::Delay(by) => {
-                tokio::time::sleep(by).await;
-                true
-            }
-        }
-    }
-
     /// Encodes and publishes one message on `topic`. Blocks (never drops) under congestion:
     /// transitions and weights must not be lost silently.
     pub async fn put<M: Message>(&self, topic: Topic, message: &M) -> Result<(), NodeError> {
-        if !self.send_verdict(topic).await {
+        if !let_out(&self.faults, topic).await {
             return Ok(());
         }
         self.session
@@ -98,7 +86,7 @@ impl Bus {
     /// congestion: the next report supersedes it.
     pub async fn put_stats(&self, report: &proto::StatsReport) -> Result<(), NodeError> {
         let topic = Topic::Stats(self.node);
-        if !self.send_verdict(topic).await {
+        if !let_out(&self.faults, topic).await {
             return Ok(());
         }
         self.session.put(topic.key(&self.run), proto::encode(report)).await.map_err(NodeError::zenoh)
@@ -161,7 +149,7 @@ impl Bus {
         payload: Option<Vec<u8>>,
         timeout: Duration,
     ) -> Result<Option<Result<ZBytes, String>>, NodeError> {
-        if !self.send_verdict(topic).await {
+        if !let_out(&self.faults, topic).await {
             // A lost query is answered by silence, after its timeout.
             tokio::time::sleep(timeout).await;
             return Ok(None);

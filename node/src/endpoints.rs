@@ -93,6 +93,18 @@ impl<T: Keyed> Gate<T> {
     }
 }
 
+/// Whether an outgoing message on `topic` goes now (after any delay a rule asks for), or is lost.
+pub(crate) async fn let_out(faults: &Faults, topic: Topic) -> bool {
+    match faults.verdict(Direction::Out, || Some(topic)) {
+        Verdict::Pass => true,
+        Verdict::Drop => false,
+        Verdict::Delay(by) => {
+            tokio::time::sleep(by).await;
+            true
+        }
+    }
+}
+
 /// A publisher of one topic.
 pub struct Publisher {
     inner: zenoh::pubsub::Publisher<'static>,
@@ -113,10 +125,8 @@ impl Publisher {
 
     /// Publishes an encoded frame.
     pub async fn put(&self, frame: impl Into<ZBytes>) -> Result<(), NodeError> {
-        match self.faults.verdict(Direction::Out, || Some(self.topic)) {
-            Verdict::Pass => {}
-            Verdict::Drop => return Ok(()),
-            Verdict::Delay(by) => tokio::time::sleep(by).await,
+        if !let_out(&self.faults, self.topic).await {
+            return Ok(());
         }
         self.inner.put(frame).await.map_err(NodeError::zenoh)
     }
