@@ -76,6 +76,9 @@ pub struct ExecutorConfig {
     pub hierarchy: node::HierarchyKeys,
     /// `[her]`: goals appended to the observation, goal rewards, relabelled episodes.
     pub her: sim::her::HerConfig,
+    /// Deterministic mode's schedule (`[train] deterministic`, `[lockstep]`); `None` otherwise.
+    #[serde(skip)]
+    pub lockstep: Option<node::Lockstep>,
 }
 
 impl ExecutorConfig {
@@ -124,6 +127,7 @@ impl node::RoleConfig for ExecutorConfig {
         if let Some(dir) = std::env::var_os(SPOOL_DIR_ENV) {
             config.executor.spool_dir = Some(dir.into());
         }
+        config.lockstep = node::Lockstep::from_run_file(text)?;
         config.fitted()
     }
 }

@@ -87,6 +87,14 @@ pub fn executor_seed(seed: u64, id: u32) -> u64 {
 pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> anyhow::Result<Report> {
     let started = std::time::Instant::now();
     let id = bus.node().id;
+    if let Some(schedule) = config.lockstep
+        && id >= schedule.executors
+    {
+        anyhow::bail!(
+            "deterministic mode runs executors 0..{} ([lockstep] executors); this is executor {id}",
+            schedule.executors
+        );
+    }
     let seed = executor_seed(config.train.seed, id);
     let task = config.task().map_err(anyhow::Error::msg)?;
     let env = config.her.make(task, seed)?;
@@ -132,11 +140,15 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
 
     let inbox = Arc::new(Inbox::default());
     let (out_tx, mut out_rx) = mpsc::channel(64);
+    let (wanted_tx, wanted_rx) = watch::channel(None);
+    let lockstep =
+        config.lockstep.map(|schedule| worker::Lockstep { schedule, wanted: wanted_tx, staged: None });
+    let exact = lockstep.is_some().then_some(wanted_rx);
     let worker = {
         let (inbox, settings) = (inbox.clone(), config.executor.clone());
         std::thread::Builder::new()
             .name(format!("rollout-{id}"))
-            .spawn(move || worker::run(id, rollout, inbox, out_tx, settings))?
+            .spawn(move || worker::run(id, rollout, inbox, out_tx, settings, lockstep))?
     };
 
     let mut report = Report::default();
@@ -146,6 +158,7 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
     let fetcher = tokio::spawn(weights::fetch_loop(weights::Fetch {
         bus: bus.clone(),
         announced: announced_rx,
+        exact,
         inbox: inbox.clone(),
         timeout: Duration::from_millis(config.executor.weights_timeout_ms),
         stack: stack_hash,

@@ -235,6 +235,23 @@ impl Rollout {
         self.seq += 1;
         Ok(Some(experience))
     }
+
+    /// A batch without transitions that says "every step up to now is sent" (deterministic mode's
+    /// block end, when the block's last steps made no transition to send).
+    pub fn marker(&mut self) -> ExperienceBatch {
+        let (obs_dim, act_dim) = (self.pending.obs_dim, self.pending.act_dim);
+        let marker = ExperienceBatch {
+            executor_id: self.executor_id,
+            stream: self.stream,
+            seq: self.seq,
+            weights_version: self.actor.version().unwrap_or(0),
+            env_steps: self.env_steps,
+            transitions: Transitions::with_capacity(obs_dim, act_dim, 0),
+            td_errors: Vec::new(),
+        };
+        self.seq += 1;
+        marker
+    }
 }
 
 #[cfg(test)]

@@ -4,8 +4,9 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use agent::ParamSnapshot;
 use proto::{BarrierReport, EpisodeReport, ExperienceBatch, GlobalStep};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
 
 use crate::ExecutorSettings;
 use crate::inbox::Inbox;
@@ -18,6 +19,11 @@ pub enum Wait {
     NoGlobalStep,
     /// No weights loaded yet.
     NoWeights,
+    /// Deterministic mode: the next step must act with this exact version, not yet fetched.
+    ExactWeights {
+        /// The version the step needs.
+        want: u64,
+    },
     /// Its weights are older than the lag bound allows.
     StaleWeights {
         /// Version held.
@@ -46,7 +52,7 @@ impl Wait {
     pub fn what(&self) -> &'static str {
         match self {
             Wait::NoGlobalStep | Wait::ParamServerSilent { .. } => "executor/global_step",
-            Wait::NoWeights | Wait::StaleWeights { .. } => "executor/weights",
+            Wait::NoWeights | Wait::StaleWeights { .. } | Wait::ExactWeights { .. } => "executor/weights",
             Wait::Barrier { .. } => "executor/barrier",
         }
     }
@@ -60,6 +66,9 @@ impl Wait {
                 format!(
                     "at the barrier, and no global step announced for {silent_s} s: is the param server up?"
                 )
+            }
+            Wait::ExactWeights { want } => {
+                format!("deterministic mode: the next step acts with weights version {want}, not fetched yet")
             }
             Wait::StaleWeights { have, min } => {
                 format!("weights version {have} is older than the allowed {min}")
@@ -156,6 +165,11 @@ pub struct WorkerReport {
 
 struct Worker {
     id: u32,
+    /// Deterministic mode: the schedule, where the exact version wanted is posted for the fetch
+    /// task, and a fetched version not yet due (it is loaded at its block's start).
+    lockstep: Option<Lockstep>,
+    /// Env steps covered by the last batch handed over (deterministic mode's block-end marker).
+    sent_through: u64,
     rollout: Rollout,
     inbox: Arc<Inbox>,
     out: mpsc::Sender<Out>,
@@ -171,6 +185,16 @@ struct Worker {
     rejects: node::Rejects,
 }
 
+/// Deterministic mode's part of the rollout thread.
+pub struct Lockstep {
+    /// The schedule.
+    pub schedule: node::Lockstep,
+    /// The version the next step needs, for the fetch task.
+    pub wanted: watch::Sender<Option<u64>>,
+    /// A fetched version, kept until its block starts.
+    pub staged: Option<ParamSnapshot>,
+}
+
 /// Runs the rollout until the inbox says stop (or the shell goes away); errors end it early.
 pub fn run(
     id: u32,
@@ -178,9 +202,12 @@ pub fn run(
     inbox: Arc<Inbox>,
     out: mpsc::Sender<Out>,
     settings: ExecutorSettings,
+    lockstep: Option<Lockstep>,
 ) -> anyhow::Result<WorkerReport> {
     let mut w = Worker {
         id,
+        lockstep,
+        sent_through: 0,
         rollout,
         inbox,
         out,
@@ -219,20 +246,16 @@ impl Worker {
                 break;
             }
             if let Some(snapshot) = weights {
-                // Bad weights (a corrupt or forged frame, wrong shapes, non-finite values) never stop
-                // the executor: it keeps acting with the weights it has (the load is all or nothing)
-                // and the fetch task waits for a newer version.
-                match self.rollout.load(&snapshot) {
-                    Ok(()) => self.report.weights_loads += 1,
-                    Err(error) => {
-                        self.report.weights_unloadable += 1;
-                        let detail = format!("version {}: {error}", snapshot.version);
-                        self.rejects.record("weights/unloadable", &detail, Instant::now());
-                    }
+                match self.lockstep.as_mut() {
+                    Some(lockstep) => lockstep.staged = Some(snapshot),
+                    None => self.load(&snapshot),
                 }
             }
             self.step = step;
-            let wait = self.check();
+            let wait = match self.lockstep.as_ref().map(|l| l.schedule) {
+                Some(schedule) => self.check_lockstep(schedule),
+                None => self.check(),
+            };
             match wait {
                 None => {
                     if let Some(waiting) = self.waiting.take() {
@@ -287,6 +310,53 @@ impl Worker {
         Ok(())
     }
 
+    /// Loads `snapshot`. Bad weights (a corrupt or forged frame, wrong shapes, non-finite values)
+    /// never stop the executor: it keeps acting with the weights it has (the load is all or nothing)
+    /// and the fetch task waits for a newer version.
+    fn load(&mut self, snapshot: &ParamSnapshot) {
+        match self.rollout.load(snapshot) {
+            Ok(()) => self.report.weights_loads += 1,
+            Err(error) => {
+                self.report.weights_unloadable += 1;
+                let detail = format!("version {}: {error}", snapshot.version);
+                self.rejects.record("weights/unloadable", &detail, Instant::now());
+            }
+        }
+    }
+
+    /// Deterministic mode's [`Worker::check`]: the allowance is the schedule's, and each step acts
+    /// with exactly the version the schedule names (asked of the fetch task in advance).
+    fn check_lockstep(&mut self, schedule: node::Lockstep) -> Option<Wait> {
+        let Some(step) = self.step else { return Some(Wait::NoGlobalStep) };
+        self.joined_at.get_or_insert(0);
+        self.allowed = schedule.allowance(step.learner_step);
+        let env_steps = self.rollout.env_steps();
+        let want = schedule.weights_for(env_steps);
+        if let Some(lockstep) = &self.lockstep {
+            lockstep.wanted.send_if_modified(|v| v.replace(want) != Some(want));
+        }
+        if env_steps >= self.allowed {
+            return Some(self.at_barrier(env_steps, step));
+        }
+        if self.rollout.weights_version() != Some(want) {
+            let staged = self.lockstep.as_mut().and_then(|l| l.staged.take_if(|s| s.version == want));
+            match staged {
+                Some(snapshot) => self.load(&snapshot),
+                None => return Some(Wait::ExactWeights { want }),
+            }
+        }
+        None
+    }
+
+    /// The wait at the barrier, or a silent param server's when it has said nothing for long.
+    fn at_barrier(&self, env_steps: u64, step: GlobalStep) -> Wait {
+        let silent = self.heard_at.map_or(Duration::ZERO, |at| at.elapsed());
+        if silent >= Duration::from_millis(self.settings.wait_deadline_ms) {
+            return Wait::ParamServerSilent { silent_s: silent.as_secs() };
+        }
+        Wait::Barrier { env_steps, allowed: self.allowed, learner_step: step.learner_step }
+    }
+
     /// Whether the rollout may step now, and if not, why.
     fn check(&mut self) -> Option<Wait> {
         let Some(step) = self.step else { return Some(Wait::NoGlobalStep) };
@@ -299,11 +369,7 @@ impl Worker {
         }
         let env_steps = self.rollout.env_steps();
         if env_steps >= self.allowed {
-            let silent = self.heard_at.map_or(Duration::ZERO, |at| at.elapsed());
-            if silent >= Duration::from_millis(self.settings.wait_deadline_ms) {
-                return Some(Wait::ParamServerSilent { silent_s: silent.as_secs() });
-            }
-            return Some(Wait::Barrier { env_steps, allowed: self.allowed, learner_step: step.learner_step });
+            return Some(self.at_barrier(env_steps, step));
         }
         None
     }
@@ -325,6 +391,20 @@ impl Worker {
         } else if self.rollout.pending() >= self.settings.batch_transitions as usize {
             self.flush()?;
         }
+        if let Some(lockstep) = &self.lockstep {
+            // At a block's end everything of the block goes out, and the replay server learns that
+            // the block is complete even when its last steps made no transition.
+            let env_steps = self.rollout.env_steps();
+            let schedule = lockstep.schedule;
+            if env_steps == schedule.block_end(schedule.block_of(env_steps - 1)) {
+                self.flush()?;
+                if self.sent_through < env_steps {
+                    let marker = self.rollout.marker();
+                    self.sent_through = marker.env_steps;
+                    self.send(Out::Experience(marker));
+                }
+            }
+        }
         Ok(())
     }
 
@@ -332,6 +412,7 @@ impl Worker {
     fn flush(&mut self) -> anyhow::Result<()> {
         while let Some(batch) = self.rollout.flush(self.settings.batch_transitions as usize)? {
             self.report.batches += 1;
+            self.sent_through = batch.env_steps;
             self.send(Out::Experience(batch));
         }
         Ok(())
@@ -434,7 +515,7 @@ mod tests {
             ExecutorSettings { batch_transitions: 4, report_interval_ms: 10, ..ExecutorSettings::default() };
         let worker = {
             let inbox = inbox.clone();
-            std::thread::spawn(move || run(0, rollout, inbox, tx, settings))
+            std::thread::spawn(move || run(0, rollout, inbox, tx, settings, None))
         };
         Running { cfg, inbox, rx, worker }
     }

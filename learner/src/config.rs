@@ -96,6 +96,10 @@ pub struct LearnerConfig {
     /// `[her]`: with goals, the networks' input is observation ++ goal and evaluations step the
     /// goal-conditioned task (relabelling happens in the executors).
     pub her: sim::her::HerConfig,
+    /// Deterministic mode's schedule (`[train] deterministic`, `[lockstep]`; `None` otherwise): one
+    /// sample request in flight, each for an exact learner step.
+    #[serde(skip)]
+    pub lockstep: Option<node::Lockstep>,
 }
 
 /// The replay server's request deadline, read from the shared run file to check the learner's
@@ -157,6 +161,20 @@ impl node::RoleConfig for LearnerConfig {
                 proto::MAX_BATCH_LEN
             ));
         }
+        if let Some(lockstep) = &self.lockstep {
+            if s.publish_weights_every_updates != lockstep.updates_per_round {
+                return Err(format!(
+                    "deterministic mode publishes the weights once per round: [learner] \
+                     publish_weights_every_updates ({}) must equal [lockstep] updates_per_round ({})",
+                    s.publish_weights_every_updates, lockstep.updates_per_round
+                ));
+            }
+            if !s.send_priorities {
+                return Err("deterministic mode needs [learner] send_priorities = true: each sample \
+                            waits for the priorities of the updates before it"
+                    .into());
+            }
+        }
         self.her.validate(self.task()?, self.agent.n_step)?;
         self.agent.validate().map_err(|e| format!("[agent] {e}"))
     }
@@ -172,6 +190,7 @@ impl node::RoleConfig for LearnerConfig {
         if let Some(dir) = std::env::var_os(CHECKPOINT_DIR_ENV) {
             config.learner.checkpoint_dir = Some(PathBuf::from(dir));
         }
+        config.lockstep = node::Lockstep::from_run_file(text)?;
         config.fitted()
     }
 }

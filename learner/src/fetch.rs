@@ -112,15 +112,19 @@ pub struct Requests {
     pub timeout: Duration,
     /// Keep IS weights (prioritized replay).
     pub prioritized: bool,
+    /// Deterministic mode: the learner step of the next request, which its batches will be used
+    /// at (one request loop; it moves on by `batches_per_request` per batch received).
+    pub exact_step: Option<Arc<AtomicU64>>,
 }
 
 /// One request loop: ask, wait for the reply (bounded), hand the batch over; until shutdown or the
 /// update thread hangs up.
 pub async fn request_loop(r: Requests, batches: mpsc::Sender<Sampled>, mut shutdown: Shutdown) {
     loop {
+        let step = r.exact_step.as_ref().unwrap_or(&r.step);
         let request = SampleRequest {
             request_id: r.fetcher.next_request.fetch_add(1, Ordering::Relaxed),
-            learner_step: r.step.load(Ordering::Relaxed),
+            learner_step: step.load(Ordering::Relaxed),
             batch_size: r.batch_size * r.batches_per_request,
         };
         let outcome = tokio::select! {
@@ -133,6 +137,9 @@ pub async fn request_loop(r: Requests, batches: mpsc::Sender<Sampled>, mut shutd
                     s.batches += 1;
                     s.waiting = None;
                 });
+                if let Some(next) = &r.exact_step {
+                    next.fetch_add(u64::from(r.batches_per_request), Ordering::Relaxed);
+                }
                 let sampled = Sampled::from_wire(batch, r.prioritized);
                 for part in sampled.split(r.batches_per_request as usize) {
                     tokio::select! {

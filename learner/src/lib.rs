@@ -120,7 +120,14 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     } else {
         None
     };
-    let (batch_tx, batch_rx) = mpsc::channel(s.prefetch_batches as usize);
+    // Deterministic mode: one request in flight, for an exact step; its batches fit the channel, so
+    // the next request goes out while they are used (the replay server holds it until the
+    // priorities it must see have arrived).
+    let (request_loops, channel) = match config.lockstep {
+        Some(_) => (1, s.batches_per_request as usize),
+        None => (s.prefetch_batches, s.prefetch_batches as usize),
+    };
+    let (batch_tx, batch_rx) = mpsc::channel(channel);
     let updater =
         Updater { learner, settings: s.clone(), out: out_tx, eval, checkpoints, step: step.clone(), frozen };
     let update_thread =
@@ -135,8 +142,11 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
         batches_per_request: s.batches_per_request,
         timeout: Duration::from_millis(s.sample_timeout_ms),
         prioritized: s.send_priorities,
+        exact_step: config
+            .lockstep
+            .map(|_| Arc::new(AtomicU64::new(step.load(std::sync::atomic::Ordering::Relaxed)))),
     };
-    let loops: Vec<_> = (0..s.prefetch_batches)
+    let loops: Vec<_> = (0..request_loops)
         .map(|_| tokio::spawn(fetch::request_loop(requests.clone(), batch_tx.clone(), shutdown.clone())))
         .collect();
     drop(batch_tx);

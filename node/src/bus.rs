@@ -149,12 +149,25 @@ impl Bus {
         payload: Option<Vec<u8>>,
         timeout: Duration,
     ) -> Result<Option<Result<ZBytes, String>>, NodeError> {
+        self.query_with(topic, "", payload, timeout).await
+    }
+
+    /// [`Bus::query`] with selector `parameters` (`name=value;...`; empty for none).
+    pub async fn query_with(
+        &self,
+        topic: Topic,
+        parameters: &str,
+        payload: Option<Vec<u8>>,
+        timeout: Duration,
+    ) -> Result<Option<Result<ZBytes, String>>, NodeError> {
         if !let_out(&self.faults, topic).await {
             // A lost query is answered by silence, after its timeout.
             tokio::time::sleep(timeout).await;
             return Ok(None);
         }
-        let mut get = self.session.get(topic.key(&self.run)).express(true).timeout(timeout);
+        let key = topic.key(&self.run);
+        let selector = if parameters.is_empty() { key } else { format!("{key}?{parameters}") };
+        let mut get = self.session.get(selector).express(true).timeout(timeout);
         if let Some(payload) = payload {
             get = get.payload(payload);
         }

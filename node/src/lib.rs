@@ -1,7 +1,7 @@
 //! What every process needs to join a run on the bus: command-line options ([`NodeArgs`]), the zenoh
 //! session scoped to a run id ([`Bus`]), a shutdown signal that tests can trigger ([`Shutdown`]),
-//! tracing set-up ([`telemetry`]), per-crate TOML config tables ([`config`]) and atomic, durable file
-//! writes ([`durable`]).
+//! tracing set-up ([`telemetry`]), per-crate TOML config tables ([`config`]), deterministic mode's
+//! schedule ([`lockstep`]) and atomic, durable file writes ([`durable`]).
 //!
 //! A role binary is a thin `main` over its library's `run(cfg, bus, shutdown)`; [`launch`] is that
 //! `main`, written once for all roles.
@@ -16,6 +16,7 @@ mod endpoints;
 mod error;
 pub mod faults;
 mod launch;
+pub mod lockstep;
 mod port;
 mod rejects;
 mod shutdown;
@@ -29,6 +30,7 @@ pub use endpoints::{Delivery, Incoming, Keyed, Publisher, Queryable, Subscriber}
 pub use error::NodeError;
 pub use faults::{Direction, Fault, Faults};
 pub use launch::{launch, main};
+pub use lockstep::{Lockstep, LockstepKeys};
 pub use port::free_loopback_port;
 pub use rejects::{Rejects, WARN_EVERY};
 pub use shutdown::{Shutdown, ShutdownTrigger};

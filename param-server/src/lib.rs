@@ -101,7 +101,7 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
         state = state.with_stack(*hash);
     }
     let frozen_reply = frozen.map(|(_, message)| zenoh::bytes::ZBytes::from(proto::encode(&message)));
-    let mut latest: Option<zenoh::bytes::ZBytes> = None;
+    let mut held = Held::default();
     let mut announce = tokio::time::interval(Duration::from_millis(config.announce_interval_ms));
     let mut stats = tokio::time::interval(Duration::from_millis(config.stats_interval_ms));
     loop {
@@ -111,7 +111,9 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
                 let accepted = state.on_weights(&sample.payload().to_bytes());
                 if accepted {
                     // The received frame is exactly what the queryable serves: keep it, no re-encode.
-                    latest = Some(sample.payload().clone());
+                    if let Some(version) = state.latest_version() {
+                        held.take(version, sample.payload().clone());
+                    }
                 }
                 accepted
             }
@@ -131,9 +133,9 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
                 _ => false,
             },
             Ok(query) = queryable.recv() => {
-                let reply = match &latest {
-                    Some(bytes) => query.reply(&weights_key, bytes.clone()).express(true).await,
-                    None => query.reply_err("no weights published yet").await,
+                let reply = match held.serve(query.parameters().get(topics::WEIGHTS_VERSION_PARAMETER)) {
+                    Ok(bytes) => query.reply(&weights_key, bytes.clone()).express(true).await,
+                    Err(why) => query.reply_err(why).await,
                 };
                 if let Err(error) = reply {
                     tracing::debug!(%error, "weights reply failed");
@@ -183,6 +185,34 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
     Ok(report)
 }
 
+/// The newest weights frame and the one before it, as received. Deterministic mode's executors ask
+/// for an exact version, and the learner may publish the next while an executor still needs this
+/// one (`node::lockstep`), never two ahead.
+#[derive(Debug, Default)]
+struct Held {
+    latest: Option<(u64, zenoh::bytes::ZBytes)>,
+    previous: Option<(u64, zenoh::bytes::ZBytes)>,
+}
+
+impl Held {
+    fn take(&mut self, version: u64, frame: zenoh::bytes::ZBytes) {
+        self.previous = self.latest.replace((version, frame));
+    }
+
+    /// The frame of `version` (the newest without one), or why there is none.
+    fn serve(&self, version: Option<&str>) -> Result<&zenoh::bytes::ZBytes, String> {
+        let Some((newest, frame)) = &self.latest else { return Err("no weights published yet".into()) };
+        let Some(wanted) = version else { return Ok(frame) };
+        let wanted: u64 = wanted.parse().map_err(|_| format!("bad version parameter {wanted:?}"))?;
+        [&self.latest, &self.previous]
+            .into_iter()
+            .flatten()
+            .find(|(v, _)| *v == wanted)
+            .map(|(_, frame)| frame)
+            .ok_or_else(|| format!("version {wanted} is not held (newest {newest})"))
+    }
+}
+
 /// The frozen levels named by `[hierarchy]`, read and checked (they must chain), with their
 /// content hash; `None` for a single-level run.
 pub fn frozen_levels(
@@ -196,4 +226,23 @@ pub fn frozen_levels(
     let levels =
         stack.weights().into_iter().map(|w| proto::FrozenLevel { safetensors: w.to_vec() }).collect();
     Ok(Some((content_hash, proto::FrozenLevels { content_hash, levels })))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_newest_and_the_one_before_are_served_by_version() {
+        let mut held = Held::default();
+        assert_eq!(held.serve(None).unwrap_err(), "no weights published yet");
+        for version in [0, 500, 1000] {
+            held.take(version, zenoh::bytes::ZBytes::from(vec![version as u8]));
+        }
+        let byte = |r: Result<&zenoh::bytes::ZBytes, String>| r.map(|b| b.to_bytes()[0]);
+        assert_eq!(byte(held.serve(None)), Ok(1000u64 as u8));
+        assert_eq!(byte(held.serve(Some("500"))), Ok(500u64 as u8));
+        assert_eq!(byte(held.serve(Some("0"))).unwrap_err(), "version 0 is not held (newest 1000)");
+        assert!(held.serve(Some("x")).unwrap_err().contains("bad version"));
+    }
 }

@@ -104,6 +104,11 @@ impl State {
         moved
     }
 
+    /// The version of the newest weights taken, if any.
+    pub fn latest_version(&self) -> Option<u64> {
+        self.store.latest().map(|s| s.version)
+    }
+
     /// A frame from `params/publish`. Returns whether it became the latest weights.
     pub fn on_weights(&mut self, bytes: &[u8]) -> bool {
         let snapshot = match proto::decode::<WeightsSnapshot>(bytes) {

@@ -157,7 +157,7 @@ pub struct ExperienceBatch {
     pub weights_version: u64,
     /// The executor's cumulative environment steps after the last transition of this batch.
     pub env_steps: u64,
-    /// The transitions.
+    /// The transitions; none in a marker (see [`Message::validate`] for this type).
     pub transitions: Transitions,
     /// `n` absolute TD errors `|δ|` the executor computed, for the initial priority; the replay
     /// server applies `p = (|δ| + ε)^α` itself, so α and ε live in one place.
@@ -187,6 +187,18 @@ impl Message for ExperienceBatch {
     const KIND: MessageKind = MessageKind::ExperienceBatch;
 
     fn validate(&self) -> Result<(), ValidationError> {
+        if self.is_empty() {
+            // A marker: in deterministic mode an executor says "my steps up to `env_steps` are all
+            // sent" at each block's end, whether or not the block's last steps made transitions.
+            check::dim("obs_dim", self.transitions.obs_dim)?;
+            check::dim("act_dim", self.transitions.act_dim)?;
+            let t = &self.transitions;
+            check::len("observations", 0, t.observations.len())?;
+            check::len("actions", 0, t.actions.len())?;
+            check::len("next_observations", 0, t.next_observations.len())?;
+            check::len("terminated", 0, t.terminated.len())?;
+            return check::len("td_errors", 0, self.td_errors.len());
+        }
         self.transitions.validate()?;
         check::len("td_errors", self.len(), self.td_errors.len())?;
         check::finite_non_negative("td_errors", &self.td_errors)
@@ -292,6 +304,14 @@ mod tests {
             td_errors: vec![-0.5],
         };
         assert_eq!(batch.validate(), Err(ValidationError::Negative { field: "td_errors", index: 0 }));
+        // A marker (no transitions) is valid, but only with every column empty.
+        let marker = ExperienceBatch { transitions: empty.clone(), td_errors: vec![], ..batch.clone() };
+        assert_eq!(marker.validate(), Ok(()));
+        let mut ragged = marker.clone();
+        ragged.transitions.actions.push(1.0);
+        assert!(matches!(ragged.validate(), Err(ValidationError::LengthMismatch { field: "actions", .. })));
+        let no_dims = ExperienceBatch { transitions: Transitions { obs_dim: 0, ..empty }, ..marker };
+        assert!(no_dims.validate().is_err());
         // encode reserves the whole frame up front (the hint is an upper bound here), so it never reallocates.
         let frame = crate::encode(&batch);
         assert!(frame.len() <= frame.capacity());

@@ -305,6 +305,10 @@ pub fn params_weights(run: &RunId) -> String {
     Topic::ParamsWeights.key(run)
 }
 
+/// The selector parameter of a `params/weights` query that asks for one exact version
+/// (`params/weights?version=500`); without it the newest is served.
+pub const WEIGHTS_VERSION_PARAMETER: &str = "version";
+
 /// `rl/<run>/params/frozen`: the param server's queryable of a hierarchy's frozen levels.
 pub fn params_frozen(run: &RunId) -> String {
     Topic::ParamsFrozen.key(run)

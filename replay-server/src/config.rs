@@ -43,6 +43,11 @@ pub struct ReplayServerConfig {
     /// `memory_budget_bytes`, which here bounds *everything* the server holds (see [`MemoryPlan`]).
     #[serde(skip)]
     pub buffer: ReplayConfig,
+    /// Deterministic mode's schedule (`[train] deterministic`, `[lockstep]`; `None` otherwise):
+    /// experience is staged and inserted by the schedule, and the limiter and minimum size are
+    /// replaced by it.
+    #[serde(skip)]
+    pub lockstep: Option<node::Lockstep>,
     /// Source of new transitions' priorities. Default `td_error`.
     pub initial_priority: InitialPriority,
     /// No sampling below this many stored transitions. Default 10_000 (the paper's warm-up).
@@ -90,6 +95,7 @@ impl Default for ReplayServerConfig {
             obs_dim: proto::DEFAULT_TRANSITION_DIMS.0,
             act_dim: proto::DEFAULT_TRANSITION_DIMS.1,
             buffer: ReplayConfig::default(),
+            lockstep: None,
             initial_priority: InitialPriority::TdError,
             min_size_to_sample: 10_000,
             samples_per_insert: None,
@@ -308,6 +314,7 @@ impl node::RoleConfig for ReplayServerConfig {
         if let Some(path) = std::env::var_os(SNAPSHOT_PATH_ENV) {
             config.snapshot_path = Some(path.into());
         }
+        config.lockstep = node::Lockstep::from_run_file(text)?;
         Ok(config)
     }
 }

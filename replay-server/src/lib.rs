@@ -22,6 +22,7 @@
 //! |---------------|------------------------------------------------------------------------------|
 //! | `config.rs`   | [`ReplayServerConfig`] (`[replay_server]`), liveness and memory checks        |
 //! | `limiter.rs`  | [`RateLimiter`]: minimum size, samples-per-insert with tolerance (sans-IO)    |
+//! | `lockstep.rs` | deterministic mode: experience staged per block, priorities queued (sans-IO) |
 //! | `service.rs`  | [`Service`]: buffer + limiter + counters + rejections, bytes in, replies out  |
 //! | `rejects.rs`  | reasons for bad input, counts, rate-limited warnings                          |
 //! | `pending.rs`  | blocked sample requests with deadlines (sans-IO)                              |
@@ -49,6 +50,7 @@
 
 mod config;
 mod limiter;
+mod lockstep;
 mod pending;
 mod rejects;
 mod replica;

@@ -57,6 +57,8 @@ pub enum Blocked {
         /// Inserts still needed before this request fits.
         missing_inserts: u64,
     },
+    /// Deterministic mode: the schedule says the sample must wait for this.
+    Lockstep(crate::lockstep::LockstepWait),
 }
 
 impl Blocked {
@@ -65,6 +67,7 @@ impl Blocked {
         match self {
             Blocked::BelowMinSize { .. } => "below_min_size",
             Blocked::RateLimited { .. } => "rate_limited",
+            Blocked::Lockstep(_) => "lockstep",
         }
     }
 
@@ -76,6 +79,9 @@ impl Blocked {
                 samples_per_insert: ratio_if_served,
                 max_samples_per_insert: max_ratio,
             },
+            // Not "for data" to the learner: the executors' barrier is the schedule's, which no
+            // refill of the param server's could lift.
+            Blocked::Lockstep(wait) => proto::RefusalReason::Other { detail: wait.to_string() },
         }
     }
 
@@ -84,6 +90,7 @@ impl Blocked {
         match *self {
             Blocked::BelowMinSize { have, min } => min.saturating_sub(have),
             Blocked::RateLimited { missing_inserts, .. } => missing_inserts,
+            Blocked::Lockstep(_) => 0,
         }
     }
 }
@@ -96,6 +103,7 @@ impl std::fmt::Display for Blocked {
                 f,
                 "samples per insert would be {ratio_if_served:.2} > {max_ratio:.2}; needs {missing_inserts} more inserts"
             ),
+            Blocked::Lockstep(wait) => write!(f, "{wait}"),
         }
     }
 }

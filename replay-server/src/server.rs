@@ -177,7 +177,14 @@ async fn priority_loop(ctx: Arc<Ctx>, sub: Subscriber, mut shutdown: Shutdown) -
         let Some(sample) = next_sample(&sub, &mut shutdown).await else { break };
         let decoded = proto::decode::<PriorityUpdate>(&sample.payload().to_bytes());
         // Rejections are counted and logged inside; nothing else to do with them here.
-        let _ = ctx.lock().accept_priorities(decoded, Instant::now());
+        let wake = {
+            let mut service = ctx.lock();
+            service.accept_priorities(decoded, Instant::now()).is_ok() && service.is_lockstep()
+        };
+        if wake {
+            // In deterministic mode a held sample may be waiting for exactly this update.
+            ctx.inserted.notify_one();
+        }
         tokio::task::yield_now().await;
     }
     Ok(())

@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::{InitialPriority, ReplayServerConfig};
 use crate::limiter::{Blocked, RateLimiter, Resumed};
+use crate::lockstep::{Lockstep, Plan};
 use crate::rejects::{Input, Rejection, Rejects};
 use crate::replica::{Op, ReplicaLink};
 use crate::snapshot::Sidecar;
@@ -97,6 +98,8 @@ pub struct Service {
     waiting: Option<Waiting>,
     insert_wait: Option<Waiting>,
     scratch: replay::SampledBatch,
+    /// Deterministic mode's staging; `None` in normal mode.
+    lockstep: Option<Lockstep>,
 }
 
 /// Inserts an experience batch into `buffer` under `rule`; shared by the service and its replica,
@@ -164,6 +167,7 @@ impl Service {
             waiting: None,
             insert_wait: None,
             scratch: replay::SampledBatch::new(),
+            lockstep: cfg.lockstep.map(Lockstep::new),
         };
         (service, resumed)
     }
@@ -257,8 +261,27 @@ impl Service {
         decided
     }
 
-    /// Checks a decoded batch against the task and limits, and inserts it.
+    /// Whether the service runs deterministic mode's schedule.
+    pub fn is_lockstep(&self) -> bool {
+        self.lockstep.is_some()
+    }
+
+    /// Checks a decoded batch against the task and limits and inserts it, or in deterministic mode
+    /// stages it until its round.
     fn insert_checked(&mut self, batch: ExperienceBatch, now: Instant) -> Result<u64, Rejection> {
+        self.check_batch(&batch, now)?;
+        let Some(lockstep) = self.lockstep.as_mut() else { return Ok(self.insert(batch)) };
+        let n = batch.len() as u64;
+        match lockstep.stage(batch) {
+            Ok(()) => Ok(n),
+            Err((reason, detail)) => {
+                Err(self.rejected(Rejection { input: Input::Experience, reason, detail }, now))
+            }
+        }
+    }
+
+    /// Checks a decoded batch against the task and limits.
+    fn check_batch(&mut self, batch: &ExperienceBatch, now: Instant) -> Result<(), Rejection> {
         let t = &batch.transitions;
         if (t.obs_dim, t.act_dim) != (self.limits.obs_dim, self.limits.act_dim) {
             let detail = format!(
@@ -274,10 +297,20 @@ impl Service {
                 self.rejected(Rejection { input: Input::Experience, reason: "too_large", detail }, now)
             );
         }
+        Ok(())
+    }
+
+    /// Inserts a checked batch; returns the transitions inserted (none for a marker).
+    fn insert(&mut self, batch: ExperienceBatch) -> u64 {
+        if batch.is_empty() {
+            return 0;
+        }
         if let Err(e) = insert_experience(&mut self.buffer, &batch, self.limits.initial_priority) {
             // Validation already covers what the buffer checks; this is a second line of defence.
             let detail = e.to_string();
-            return Err(self.rejected(Rejection { input: Input::Experience, reason: "buffer", detail }, now));
+            let rejection = Rejection { input: Input::Experience, reason: "buffer", detail };
+            self.rejected(rejection, Instant::now());
+            return 0;
         }
         let n = batch.len() as u64;
         self.limiter.on_insert(n);
@@ -286,7 +319,7 @@ impl Service {
         if let Some(replica) = &self.replica {
             replica.send(Op::Insert { batch, rule: self.limits.initial_priority });
         }
-        Ok(n)
+        n
     }
 
     /// Decodes and applies a priority-update payload.
@@ -301,6 +334,16 @@ impl Service {
         now: Instant,
     ) -> Result<UpdateOutcome, Rejection> {
         let update = decoded.map_err(|e| self.rejected(Rejection::decode(Input::Priorities, &e), now))?;
+        if let Some(lockstep) = self.lockstep.as_mut() {
+            // Applied when the sample that must see it is served (`lockstep.rs`).
+            lockstep.queue(update);
+            return Ok(UpdateOutcome::default());
+        }
+        self.apply_priorities(update, now)
+    }
+
+    /// Applies a priority update to the buffer.
+    fn apply_priorities(&mut self, update: PriorityUpdate, now: Instant) -> Result<UpdateOutcome, Rejection> {
         let outcome =
             match self.buffer.update_priorities(&update.slots, &update.generations, &update.td_errors) {
                 Ok(outcome) => outcome,
@@ -335,7 +378,7 @@ impl Service {
         decoded.map_err(|e| self.rejected(Rejection::decode(Input::Sample, &e), now))
     }
 
-    /// Serves `request` if the limiter allows it.
+    /// Serves `request` if the limiter (in deterministic mode, the schedule) allows it.
     pub fn try_sample(&mut self, request: &SampleRequest) -> SampleOutcome {
         if request.batch_size > self.limits.max_batch_size {
             let reason = RefusalReason::BatchTooLarge {
@@ -345,9 +388,57 @@ impl Service {
             self.count_refusal("batch_too_large");
             return SampleOutcome::Refused(reason);
         }
+        if self.lockstep.is_some() {
+            return self.try_sample_lockstep(request);
+        }
         if let Err(blocked) = self.limiter.check_sample(self.buffer.len() as u64, request.batch_size) {
             return SampleOutcome::Blocked(blocked);
         }
+        self.sample(request)
+    }
+
+    /// Deterministic mode's sample: once the round's blocks and the previous request's priorities
+    /// are in, applies those, inserts these in the canonical order, and samples.
+    fn try_sample_lockstep(&mut self, request: &SampleRequest) -> SampleOutcome {
+        let Some(lockstep) = self.lockstep.as_mut() else { return self.sample(request) };
+        let (priorities_through, blocks_through) = match lockstep.plan(request.learner_step) {
+            Err(wait) => return SampleOutcome::Blocked(Blocked::Lockstep(wait)),
+            Ok(Plan::Repeat(batch)) => {
+                tracing::debug!(
+                    learner_step = request.learner_step,
+                    "deterministic mode: a repeated request"
+                );
+                return SampleOutcome::Batch(SampledBatch { request_id: request.request_id, ..batch });
+            }
+            Ok(Plan::Stale { served }) => {
+                self.count_refusal("lockstep_stale");
+                let detail = format!(
+                    "deterministic mode: learner step {} was served before step {served}",
+                    request.learner_step
+                );
+                return SampleOutcome::Refused(RefusalReason::Other { detail });
+            }
+            Ok(Plan::Sample { priorities_through, blocks_through }) => (priorities_through, blocks_through),
+        };
+        let (updates, batches) =
+            (lockstep.take_priorities(priorities_through), lockstep.take_blocks(blocks_through));
+        let now = Instant::now();
+        for update in updates {
+            // A bad update is counted inside and skipped, as in normal mode.
+            let _ = self.apply_priorities(update, now);
+        }
+        for batch in batches {
+            self.insert(batch);
+        }
+        let outcome = self.sample(request);
+        if let (SampleOutcome::Batch(batch), Some(lockstep)) = (&outcome, self.lockstep.as_mut()) {
+            lockstep.served(request.learner_step, batch);
+        }
+        outcome
+    }
+
+    /// Samples `request` from the buffer as it is.
+    fn sample(&mut self, request: &SampleRequest) -> SampleOutcome {
         let mut rng = batch_rng(self.limits.seed, self.counters.sampled_batches);
         let batch_size = request.batch_size as usize;
         if let Err(e) = self.buffer.sample(batch_size, request.learner_step, &mut rng, &mut self.scratch) {

@@ -66,6 +66,29 @@ impl Spec {
     }
 }
 
+impl Spec {
+    /// [`Spec::tiny`] in deterministic mode: rounds of 25 updates (the tiny weights period), 10 env
+    /// steps per executor per round, no evaluations; the learner stops at `max_updates` and
+    /// checkpoints into `dir`.
+    pub fn tiny_deterministic(run_id: &str, executors: u32, dir: &std::path::Path, max_updates: u64) -> Spec {
+        let mut spec = Spec::tiny(run_id, executors);
+        let learner = format!(
+            "[learner]\nmax_updates = {max_updates}\ncheckpoint_dir = {:?}\n",
+            dir.join("checkpoints").display().to_string()
+        );
+        spec.config = spec
+            .config
+            .replace("[train]\n", "[train]\ndeterministic = true\n")
+            .replace("[learner]\n", &learner)
+            .replace("eval_episodes = 1", "eval_episodes = 0");
+        spec.config.push_str(&format!(
+            "\n[lockstep]\nexecutors = {executors}\nwarm_up_transitions = 300\nupdates_per_round = 25\n\
+             env_steps_per_round = 10\n"
+        ));
+        spec
+    }
+}
+
 /// Parses and validates role config `C` from a run file's text.
 pub fn role_config<C: RoleConfig>(text: &str) -> Result<C> {
     let config = C::parse(text).map_err(|e| anyhow!("[{}]: {e}", C::SECTION))?;
@@ -371,13 +394,32 @@ impl Cluster {
 
     /// Stops every role (executors first, the replay server last) and returns their reports.
     pub async fn stop(self) -> Result<Reports> {
+        self.stop_after_learner(false).await
+    }
+
+    /// Waits for the learner to end by itself (at `max_updates`), then stops the others as
+    /// [`Cluster::stop`] does.
+    pub async fn finish(self) -> Result<Reports> {
+        self.stop_after_learner(true).await
+    }
+
+    async fn stop_after_learner(self, learner_ends_itself: bool) -> Result<Reports> {
+        let Cluster { learner, executors: running, param, replay, .. } = self;
+        let (mut learner, mut ended) = (Some(learner), None);
+        if learner_ends_itself && let Some(learner) = learner.take() {
+            let joined = within("the learner to reach max_updates", WAIT, learner.task).await?;
+            ended = Some(joined.context("the learner panicked")??);
+        }
         let mut executors = BTreeMap::new();
-        for (id, running) in self.executors {
+        for (id, running) in running {
             executors.insert(id, running.stop(&format!("executor {id} to stop")).await?);
         }
-        let learner = self.learner.stop("the learner to stop").await?;
-        let param = self.param.stop("the param server to stop").await?;
-        let replay = self.replay.stop("the replay server to stop").await?;
+        let learner = match (learner, ended) {
+            (Some(learner), _) => learner.stop("the learner to stop").await?,
+            (None, ended) => ended.ok_or_else(|| anyhow!("the learner's report is missing"))?,
+        };
+        let param = param.stop("the param server to stop").await?;
+        let replay = replay.stop("the replay server to stop").await?;
         Ok(Reports { replay, param, learner, executors })
     }
 }

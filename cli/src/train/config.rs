@@ -34,6 +34,9 @@ pub struct TrainConfig {
     /// Which learner runs the updates: `auto` (default: the fused learner where it implements the
     /// configuration, else candle), `candle` or `fused`. Both compute the same update.
     pub backend: Backend,
+    /// The distributed roles' deterministic mode (`[lockstep]`, README "Deterministic mode"); the
+    /// single-machine loop is deterministic anyway, so here it only has to be accepted.
+    pub deterministic: bool,
 }
 
 impl Default for TrainConfig {
@@ -50,6 +53,7 @@ impl Default for TrainConfig {
             checkpoint_every_epochs: 100,
             sync_actor_every_steps: 1,
             backend: Backend::Auto,
+            deterministic: false,
         }
     }
 }
