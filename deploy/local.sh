@@ -23,6 +23,10 @@
 # DURABLE=1: no produced transition is lost: the replay server snapshots to runs/<run-id>/replay.snap
 # (every [replay_server] snapshot_interval_s) and executors keep what it has not yet made durable in
 # runs/<run-id>/spool/ (see README "Durable experience").
+# DETERMINISTIC=1: deterministic mode whatever the run file's [train] deterministic says: the N
+# executors, the learner and the replay server follow [lockstep]'s schedule, so the same run file
+# and seed give bit-identical parameters (README "Deterministic mode"). At the end local.sh prints
+# the SHA-256 of the newest learner checkpoint either way.
 # AUTH=1: an authenticated run: deploy/certs.sh makes runs/<run-id>/auth/ (a CA of the run's own, a
 # certificate per role, and per role a zenoh config with mutual TLS and access control), every role
 # talks over tls/ endpoints with its role's certificate, and only the learner may publish weights,
@@ -59,6 +63,9 @@ auth() {
     return 0
 }
 export SACLSP_CHECKPOINT_DIR="$dir/checkpoints"
+# Deterministic mode's executor set is the one started here (read only in that mode).
+export SACLSP_EXECUTORS=$n
+[[ ${DETERMINISTIC:-0} == 1 ]] && export SACLSP_DETERMINISTIC=1
 if [[ ${DURABLE:-0} == 1 ]]; then
     export SACLSP_REPLAY_SNAPSHOT="$dir/replay.snap" SACLSP_SPOOL_DIR="$dir/spool"
 fi
@@ -120,6 +127,14 @@ launch() {
     esac
 }
 
+# The newest learner checkpoint and its SHA-256: two deterministic runs end with the same one.
+report_parameters() {
+    local newest
+    newest=$(ls "$dir/checkpoints"/learner-*.safetensors 2>/dev/null | tail -n 1)
+    [[ -n $newest ]] || return 0
+    echo "local.sh: parameters $(sha256sum "$newest" | cut -d' ' -f1) in $newest" >&2
+}
+
 stopping=0
 stop_all() {
     stopping=1
@@ -166,6 +181,7 @@ while true; do
         echo "local.sh: $name (pid $pid) exited with status $status; see $dir/$name.log" >&2
         if [[ $name == learner && $status == 0 ]]; then # max_updates reached
             stop_all
+            report_parameters
             exit 0
         fi
         restarts[$name]=$((${restarts[$name]:-0} + 1))
@@ -186,6 +202,7 @@ while true; do
     if [[ -n $deadline && $now -ge $deadline ]]; then
         echo "local.sh: $MINUTES minutes are up; stopping $run_id" >&2
         stop_all
+        report_parameters
         [[ -x $bin/sac-lsp ]] && "$bin/sac-lsp" plot --input "$dir/monitor.jsonl" --out-dir "$dir" || true
         exit 0
     fi
