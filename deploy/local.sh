@@ -25,8 +25,10 @@
 # runs/<run-id>/spool/ (see README "Durable experience").
 # DETERMINISTIC=1: deterministic mode whatever the run file's [train] deterministic says: the N
 # executors, the learner and the replay server follow [lockstep]'s schedule, so the same run file
-# and seed give bit-identical parameters (README "Deterministic mode"). At the end local.sh prints
-# the SHA-256 of the newest learner checkpoint either way.
+# and seed give bit-identical parameters, and the replay server snapshots its state at every
+# learner checkpoint into runs/<run-id>/replay.snap, so that the same RUN_ID resumes exactly from
+# the last checkpoint (README "Deterministic mode"). At the end local.sh prints the SHA-256 of the
+# newest learner checkpoint either way.
 # AUTH=1: an authenticated run: deploy/certs.sh makes runs/<run-id>/auth/ (a CA of the run's own, a
 # certificate per role, and per role a zenoh config with mutual TLS and access control), every role
 # talks over tls/ endpoints with its role's certificate, and only the learner may publish weights,
@@ -65,7 +67,10 @@ auth() {
 export SACLSP_CHECKPOINT_DIR="$dir/checkpoints"
 # Deterministic mode's executor set is the one started here (read only in that mode).
 export SACLSP_EXECUTORS=$n
-[[ ${DETERMINISTIC:-0} == 1 ]] && export SACLSP_DETERMINISTIC=1
+if [[ ${DETERMINISTIC:-0} == 1 ]]; then
+    # The replay server's snapshot holds its state at each checkpoint: what the run resumes from.
+    export SACLSP_DETERMINISTIC=1 SACLSP_REPLAY_SNAPSHOT="$dir/replay.snap"
+fi
 if [[ ${DURABLE:-0} == 1 ]]; then
     export SACLSP_REPLAY_SNAPSHOT="$dir/replay.snap" SACLSP_SPOOL_DIR="$dir/spool"
 fi

@@ -77,10 +77,7 @@ pub struct Report {
 
 /// Seeds of executor `id` in a run seeded `seed`: distinct streams per executor (splitmix64).
 pub fn executor_seed(seed: u64, id: u32) -> u64 {
-    let mut z = seed.wrapping_add(0x9E37_79B9_7F4A_7C15u64.wrapping_mul(u64::from(id) + 1));
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
+    node::config::mix_seed(seed, id)
 }
 
 /// Runs the executor until `shutdown` fires.
@@ -123,10 +120,36 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
         ),
         None => None,
     };
-    let rollout = Rollout::new(id, env, actor, seed)
+    let mut rollout = Rollout::new(id, env, actor, seed)
         .with_episode_limit(config.executor.max_episode_steps)
         .with_hindsight(hindsight)
         .with_stream(if spool.is_some() { new_stream() } else { 0 });
+    if let Some(schedule) = config.lockstep {
+        // Deterministic mode: start where the replay server's newest cut says the run is.
+        let Some(cut) = node::Cut::ask(&bus, shutdown.clone()).await? else {
+            bus.close().await?;
+            return Ok(Report::default());
+        };
+        let start = if cut.learner_step == 0 { 0 } else { schedule.needed_for(cut.learner_step) };
+        let delivered = cut.progress.get(id as usize).copied().unwrap_or(0);
+        if delivered != start {
+            anyhow::bail!(
+                "deterministic mode: the replay server holds {delivered} env steps of executor {id}, past \
+                 its checkpoint at learner step {} ({start} steps): an executor cannot rejoin mid-run; \
+                 resume the whole run from its last checkpoint",
+                cut.learner_step
+            );
+        }
+        if start > 0 {
+            tracing::info!(
+                learner_step = cut.learner_step,
+                env_steps = start,
+                "deterministic mode: resuming at the cut"
+            );
+            rollout = rollout.with_env_steps(start);
+            rollout.restart_streams(node::Lockstep::cut_seed(config.train.seed, id, cut.learner_step));
+        }
+    }
 
     let queue = node::DEFAULT_QUEUE;
     let step_sub = bus.subscribe(Topic::ControlStep, queue).await?;
@@ -141,8 +164,12 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
     let inbox = Arc::new(Inbox::default());
     let (out_tx, mut out_rx) = mpsc::channel(64);
     let (wanted_tx, wanted_rx) = watch::channel(None);
-    let lockstep =
-        config.lockstep.map(|schedule| worker::Lockstep { schedule, wanted: wanted_tx, staged: None });
+    let lockstep = config.lockstep.map(|schedule| worker::Lockstep {
+        schedule,
+        seed: config.train.seed,
+        wanted: wanted_tx,
+        staged: None,
+    });
     let exact = lockstep.is_some().then_some(wanted_rx);
     let worker = {
         let (inbox, settings) = (inbox.clone(), config.executor.clone());

@@ -41,6 +41,8 @@ pub struct Rollout {
     seq: u64,
     /// Episodes are cut (as truncated) at this length: the task's limit or a shorter one.
     episode_limit: u32,
+    /// The next step ends the episode as a truncation (deterministic mode's cut).
+    truncate_next: bool,
 }
 
 impl std::fmt::Debug for Rollout {
@@ -78,7 +80,32 @@ impl Rollout {
             stream: 0,
             seq: 0,
             episode_limit: spec.max_episode_steps,
+            truncate_next: false,
         }
+    }
+
+    /// Starts counting env steps at `env_steps` (an executor resumed at a deterministic cut).
+    pub fn with_env_steps(mut self, env_steps: u64) -> Self {
+        self.env_steps = env_steps;
+        self
+    }
+
+    /// Ends the episode at the next step, as a truncation (its last state's value still counts).
+    pub fn truncate_next_step(&mut self) {
+        self.truncate_next = true;
+    }
+
+    /// Restarts the episode and every random stream from `seed`, as a new rollout seeded `seed`
+    /// starts them: the environment's reset noise (and goals), the policy's noise and the
+    /// relabelling. With nothing pending and no episode under way (right after a truncation), the
+    /// rollout is then what a new one of the same step count is: deterministic mode's cut.
+    pub fn restart_streams(&mut self, seed: u64) {
+        self.actor.reseed(seed.wrapping_add(1));
+        if let Some(h) = &mut self.hindsight {
+            h.reseed(seed.wrapping_add(2));
+        }
+        self.observation = to_f32(&self.env.reset(Some(seed)));
+        (self.episode_return, self.episode_length) = (0.0, 0);
     }
 
     /// Cuts episodes at `limit` steps if that is shorter than the task's own limit (short episodes
@@ -145,12 +172,15 @@ impl Rollout {
             if let Some(h) = &mut self.hindsight {
                 h.discard_episode();
             }
+            self.truncate_next = false;
             self.reset_episode();
             return Ok(StepOutcome { episode: None, dropped_non_finite: true, dropped_n_step_tail });
         }
         self.episode_return += step.reward;
         self.episode_length += 1;
-        let truncated = step.truncated || self.episode_length >= self.episode_limit;
+        let truncated = step.truncated
+            || self.episode_length >= self.episode_limit
+            || std::mem::take(&mut self.truncate_next);
         // Only a true termination stops bootstrapping; the time limit does not.
         let end = StepEnd { terminated: step.terminated, truncated };
         let pending = &mut self.pending;

@@ -189,6 +189,8 @@ struct Worker {
 pub struct Lockstep {
     /// The schedule.
     pub schedule: node::Lockstep,
+    /// The run's seed, for the streams' restart at each cut.
+    pub seed: u64,
     /// The version the next step needs, for the fetch task.
     pub wanted: watch::Sender<Option<u64>>,
     /// A fetched version, kept until its block starts.
@@ -375,6 +377,11 @@ impl Worker {
     }
 
     fn step_once(&mut self) -> anyhow::Result<()> {
+        // Deterministic mode: the last step of a checkpoint's block ends the episode.
+        let cut = self.lockstep.as_ref().and_then(|l| l.schedule.cut_ending_at(self.rollout.env_steps() + 1));
+        if cut.is_some() {
+            self.rollout.truncate_next_step();
+        }
         let outcome = self.rollout.step()?;
         let over = self.rollout.env_steps() as i64 - self.allowed as i64;
         self.report.max_over_allowance = self.report.max_over_allowance.max(over);
@@ -391,11 +398,10 @@ impl Worker {
         } else if self.rollout.pending() >= self.settings.batch_transitions as usize {
             self.flush()?;
         }
-        if let Some(lockstep) = &self.lockstep {
+        if let Some((schedule, seed)) = self.lockstep.as_ref().map(|l| (l.schedule, l.seed)) {
             // At a block's end everything of the block goes out, and the replay server learns that
             // the block is complete even when its last steps made no transition.
             let env_steps = self.rollout.env_steps();
-            let schedule = lockstep.schedule;
             if env_steps == schedule.block_end(schedule.block_of(env_steps - 1)) {
                 self.flush()?;
                 if self.sent_through < env_steps {
@@ -403,6 +409,9 @@ impl Worker {
                     self.sent_through = marker.env_steps;
                     self.send(Out::Experience(marker));
                 }
+            }
+            if let Some(at) = cut {
+                self.rollout.restart_streams(node::Lockstep::cut_seed(seed, self.id, at));
             }
         }
         Ok(())

@@ -52,6 +52,15 @@ impl CheckpointDir {
         Ok(Some(Checkpoint { step, safetensors }))
     }
 
+    /// The checkpoint of `step`, if it is on disk.
+    pub fn at(&self, step: u64) -> std::io::Result<Option<Checkpoint>> {
+        match fs::read(self.path(step)) {
+            Ok(safetensors) => Ok(Some(Checkpoint { step, safetensors })),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(e),
+        }
+    }
+
     /// Writes `checkpoint` atomically and removes all but the newest few. Returns its path.
     pub fn write(&self, checkpoint: &Checkpoint) -> std::io::Result<PathBuf> {
         let path = self.path(checkpoint.step);
@@ -80,6 +89,8 @@ mod tests {
         assert_eq!(c.steps().unwrap(), vec![1000, 3000, 4000]);
         let latest = c.latest().unwrap().unwrap();
         assert_eq!((latest.step, latest.safetensors), (4000, vec![4000u64 as u8; 3]));
+        assert_eq!(c.at(3000).unwrap().map(|c| c.step), Some(3000));
+        assert!(c.at(20).unwrap().is_none(), "removed");
         fs::write(dir.join("learner-junk.safetensors"), b"x").unwrap();
         assert_eq!(c.steps().unwrap().len(), 3, "foreign names are ignored");
         fs::remove_dir_all(&dir).unwrap();

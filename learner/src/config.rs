@@ -169,6 +169,13 @@ impl node::RoleConfig for LearnerConfig {
                     s.publish_weights_every_updates, lockstep.updates_per_round
                 ));
             }
+            let every = lockstep.checkpoint_every_updates;
+            if let Some(max) = s.max_updates.filter(|max| every > 0 && !max.is_multiple_of(every)) {
+                return Err(format!(
+                    "deterministic mode ends at a checkpoint: [learner] max_updates ({max}) must be a \
+                     multiple of epoch_length_updates × checkpoint_every_epochs ({every})"
+                ));
+            }
             if !s.send_priorities {
                 return Err("deterministic mode needs [learner] send_priorities = true: each sample \
                             waits for the priorities of the updates before it"

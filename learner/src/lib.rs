@@ -85,7 +85,17 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     if let Some(hash) = frozen.hash {
         tracing::info!(levels = levels.len(), content_hash = %hash, "training on top of frozen levels");
     }
-    let learner = match checkpoints.as_ref().map(CheckpointDir::latest).transpose()?.flatten() {
+    let resume_from = match config.lockstep {
+        Some(_) => match deterministic_resume(&bus, checkpoints.as_ref(), shutdown.clone()).await? {
+            Some(checkpoint) => checkpoint,
+            None => {
+                bus.close().await?;
+                return Ok(Report::default());
+            }
+        },
+        None => checkpoints.as_ref().map(CheckpointDir::latest).transpose()?.flatten(),
+    };
+    let learner = match resume_from {
         Some(checkpoint) => {
             tracing::info!(step = checkpoint.step, "resuming from checkpoint");
             check_resumed_stack(&checkpoint, &frozen)?;
@@ -128,8 +138,16 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
         None => (s.prefetch_batches, s.prefetch_batches as usize),
     };
     let (batch_tx, batch_rx) = mpsc::channel(channel);
-    let updater =
-        Updater { learner, settings: s.clone(), out: out_tx, eval, checkpoints, step: step.clone(), frozen };
+    let updater = Updater {
+        learner,
+        settings: s.clone(),
+        out: out_tx,
+        eval,
+        checkpoints,
+        step: step.clone(),
+        frozen,
+        lockstep: config.lockstep,
+    };
     let update_thread =
         std::thread::Builder::new().name("update".into()).spawn(move || updater.run(batch_rx))?;
 
@@ -210,6 +228,23 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     while let Ok(message) = out_rx.try_recv() {
         outbox.send(message, &fetcher).await;
     }
+    let last = updater.final_step;
+    if let Some(schedule) = config.lockstep.filter(|l| l.is_cut(last) && last > updater.start_step) {
+        // The replay server cuts its state here once the executors' blocks are in: wait for it, so
+        // that a launcher stopping everything when this process ends leaves a resumable run.
+        let cut = node::Cut::wait_for(&bus, last, Duration::from_secs(60), shutdown.clone()).await?;
+        let every = schedule.checkpoint_every_updates;
+        match cut {
+            true => {
+                tracing::info!(step = last, "deterministic mode: every role's state is saved at this step")
+            }
+            false => tracing::warn!(
+                step = last,
+                every,
+                "deterministic mode: the replay server did not cut its state here in time (does it have a snapshot_path?)"
+            ),
+        }
+    }
     let report = Report {
         uptime_s: started.elapsed().as_secs_f64(),
         updater,
@@ -222,6 +257,37 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     drop(outbox);
     bus.close().await?;
     Ok(report)
+}
+
+/// Deterministic mode's checkpoint to resume: the one of the replay server's newest cut (none for a
+/// fresh run); `Ok(None)` when shut down while asking.
+async fn deterministic_resume(
+    bus: &Bus,
+    checkpoints: Option<&CheckpointDir>,
+    shutdown: Shutdown,
+) -> anyhow::Result<Option<Option<agent::Checkpoint>>> {
+    let Some(cut) = node::Cut::ask(bus, shutdown).await? else { return Ok(None) };
+    if cut.learner_step == 0 {
+        if let Some(dir) = checkpoints
+            && let Some(&newest) = dir.steps()?.last()
+        {
+            tracing::warn!(
+                newest,
+                "deterministic mode: the replay server has no cut to resume, so the run starts over at \
+                 step 0 (give it a snapshot_path to resume)"
+            );
+        }
+        return Ok(Some(None));
+    }
+    let found = checkpoints.map(|dir| dir.at(cut.learner_step)).transpose()?.flatten();
+    match found {
+        Some(checkpoint) => Ok(Some(Some(checkpoint))),
+        None => anyhow::bail!(
+            "deterministic mode: the replay server resumes at learner step {}, but there is no learner \
+             checkpoint of that step ([learner] checkpoint_dir)",
+            cut.learner_step
+        ),
+    }
 }
 
 /// Refuses to resume a checkpoint trained on other frozen levels than the run file names: its

@@ -133,6 +133,8 @@ pub struct Updater {
     /// The frozen levels below the trained one (empty for a single level): their content hash is
     /// stamped on every weights frame, and they are embedded in every checkpoint.
     pub frozen: Frozen,
+    /// Deterministic mode's schedule, whose checkpoint steps are the only ones resumable.
+    pub lockstep: Option<node::Lockstep>,
 }
 
 /// A hierarchy's frozen levels as the update thread uses them.
@@ -285,7 +287,15 @@ impl Updater {
         if step > start_step {
             weights_version = self.publish_weights(&mut report)?;
             self.send(Out::Step(LearnerStep { learner_step: step, weights_version, starved: false }));
-            self.checkpoint(&mut report);
+            // Deterministic mode resumes only at the schedule's cuts, which the periodic
+            // checkpoints are; one at another step could not be continued exactly.
+            match self.lockstep.filter(|l| !l.is_cut(step)) {
+                None => self.checkpoint(&mut report),
+                Some(_) => tracing::info!(
+                    step,
+                    "deterministic mode: no checkpoint at shutdown (not a checkpoint step)"
+                ),
+            }
         }
         report.final_step = step;
         report.wait_ms_total = total_wait.as_millis() as u64;

@@ -86,6 +86,14 @@ pub fn parse_section_over<T: Serialize + DeserializeOwned>(
     merged.try_into().map_err(|e: toml::de::Error| e.to_string())
 }
 
+/// A seed of stream `id` of a run seeded `seed`: distinct, well-mixed streams per id (splitmix64).
+pub fn mix_seed(seed: u64, id: u32) -> u64 {
+    let mut z = seed.wrapping_add(0x9E37_79B9_7F4A_7C15u64.wrapping_mul(u64::from(id) + 1));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
 /// The first `(key, value)` whose value is 0, for "must be > 0" checks in `validate()`.
 pub fn first_zero<'a>(values: &[(&'a str, u64)]) -> Option<&'a str> {
     values.iter().find(|(_, v)| *v == 0).map(|(key, _)| *key)

@@ -15,6 +15,13 @@
 //!
 //! The learner waits at a round's start for the round's blocks, the executors wait at a block's end
 //! for the learner; how long either waits changes nothing but the time taken.
+//!
+//! Checkpoints: the learner's checkpoint steps (`[learner] epoch_length_updates ×
+//! checkpoint_every_epochs`, `E`) must be round starts. At each, every role's state is cut so that a
+//! resumed run continues exactly: the learner's checkpoint, the replay server's snapshot, and the
+//! executors' state, which is made trivial: at the end of a checkpoint's block each executor ends
+//! its episode (a truncation, as a time limit) and restarts its streams from a seed of the
+//! checkpoint step, so a resumed executor only needs the step ([`Lockstep::cut_seed`]).
 
 use serde::Deserialize;
 
@@ -59,6 +66,9 @@ pub struct Lockstep {
     pub updates_per_round: u64,
     /// T.
     pub env_steps_per_round: u64,
+    /// E: the learner's checkpoint period in updates, a multiple of R (0: checkpoints only at
+    /// shutdown, and no cuts).
+    pub checkpoint_every_updates: u64,
 }
 
 impl Lockstep {
@@ -69,6 +79,18 @@ impl Lockstep {
         struct Train {
             #[serde(default)]
             deterministic: bool,
+        }
+        /// The learner's checkpoint period, as its `[learner]` table gives it (same defaults).
+        #[derive(Deserialize)]
+        #[serde(default)]
+        struct Checkpoints {
+            epoch_length_updates: u64,
+            checkpoint_every_epochs: u64,
+        }
+        impl Default for Checkpoints {
+            fn default() -> Self {
+                Self { epoch_length_updates: 1000, checkpoint_every_epochs: 100 }
+            }
         }
         let train: Train = crate::config::parse_section(text, "train")?;
         let on = match std::env::var(DETERMINISTIC_ENV) {
@@ -83,10 +105,20 @@ impl Lockstep {
         if let Ok(n) = std::env::var(EXECUTORS_ENV) {
             keys.executors = n.parse().map_err(|e| format!("{EXECUTORS_ENV}={n}: {e}"))?;
         }
-        Self::new(keys).map(Some)
+        let c: Checkpoints = crate::config::parse_section(text, "learner")?;
+        let mut schedule = Self::new(keys)?;
+        schedule.checkpoint_every_updates = c.epoch_length_updates.saturating_mul(c.checkpoint_every_epochs);
+        if !schedule.checkpoint_every_updates.is_multiple_of(schedule.updates_per_round) {
+            return Err(format!(
+                "deterministic mode checkpoints at round starts: [learner] epoch_length_updates × \
+                 checkpoint_every_epochs ({}) must be a multiple of [lockstep] updates_per_round ({})",
+                schedule.checkpoint_every_updates, schedule.updates_per_round
+            ));
+        }
+        Ok(Some(schedule))
     }
 
-    /// The schedule of `keys`; the error names the key.
+    /// The schedule of `keys`, without checkpoints; the error names the key.
     pub fn new(keys: LockstepKeys) -> Result<Lockstep, String> {
         let positive = [
             ("executors", u64::from(keys.executors)),
@@ -104,7 +136,28 @@ impl Lockstep {
             warm_up_steps: keys.warm_up_transitions.div_ceil(u64::from(keys.executors)),
             updates_per_round: keys.updates_per_round,
             env_steps_per_round: keys.env_steps_per_round,
+            checkpoint_every_updates: 0,
         })
+    }
+
+    /// Whether the learner step `step` is a checkpoint step (where the state is cut).
+    pub fn is_cut(&self, learner_step: u64) -> bool {
+        self.checkpoint_every_updates > 0
+            && learner_step > 0
+            && learner_step.is_multiple_of(self.checkpoint_every_updates)
+    }
+
+    /// The checkpoint step whose block ends at env step `env_steps`, if that block's end is a cut.
+    pub fn cut_ending_at(&self, env_steps: u64) -> Option<u64> {
+        let block = self.block_of(env_steps.checked_sub(1)?);
+        let at = block * self.updates_per_round;
+        (self.block_end(block) == env_steps && self.is_cut(at)).then_some(at)
+    }
+
+    /// The seed executor `id`'s streams restart from at checkpoint step `at`.
+    pub fn cut_seed(seed: u64, id: u32, at: u64) -> u64 {
+        // splitmix64's increment spreads consecutive checkpoints apart before the executor's mix.
+        crate::config::mix_seed(seed ^ at.wrapping_mul(0x9E37_79B9_7F4A_7C15), id)
     }
 
     /// The round learner step `step` is in.
@@ -178,6 +231,18 @@ mod tests {
     }
 
     #[test]
+    fn cuts_are_at_checkpoint_steps_and_end_their_blocks() {
+        let s = Lockstep { checkpoint_every_updates: 20, ..schedule() };
+        assert!(!s.is_cut(0) && !s.is_cut(10) && s.is_cut(20) && s.is_cut(40));
+        // Block 2 (steps 13..18) is the one stepped with version 10·... and sampled from step 20.
+        assert_eq!(s.cut_ending_at(18), Some(20));
+        assert_eq!((s.cut_ending_at(13), s.cut_ending_at(17), s.cut_ending_at(0)), (None, None, None));
+        assert_eq!(s.cut_ending_at(s.block_end(4)), Some(40));
+        assert_ne!(Lockstep::cut_seed(1, 0, 20), Lockstep::cut_seed(1, 0, 40));
+        assert_ne!(Lockstep::cut_seed(1, 0, 20), Lockstep::cut_seed(1, 1, 20));
+    }
+
+    #[test]
     fn off_unless_asked_and_zeros_are_named() {
         assert_eq!(Lockstep::from_run_file("[train]\nseed = 1\n"), Ok(None));
         let err = Lockstep::from_run_file("[train]\ndeterministic = true\n").unwrap_err();
@@ -185,6 +250,11 @@ mod tests {
         let on = "[train]\ndeterministic = true\n[lockstep]\nexecutors = 2\nupdates_per_round = 25\n";
         let s = Lockstep::from_run_file(on).unwrap().unwrap();
         assert_eq!((s.executors, s.warm_up_steps, s.updates_per_round), (2, 5000, 25));
+        assert_eq!(s.checkpoint_every_updates, 100_000, "the learner's defaults: 100 epochs of 1000");
+        let odd = format!("{on}[learner]\nepoch_length_updates = 110\ncheckpoint_every_epochs = 1\n");
+        assert!(
+            Lockstep::from_run_file(&odd).unwrap_err().contains("multiple of [lockstep] updates_per_round")
+        );
         assert!(
             Lockstep::from_run_file("[train]\ndeterministic = true\n[lockstep]\nexecutor = 2\n").is_err()
         );

@@ -50,7 +50,7 @@
 
 mod config;
 mod limiter;
-mod lockstep;
+pub mod lockstep;
 mod pending;
 mod rejects;
 mod replica;
@@ -180,12 +180,18 @@ pub async fn run(config: ReplayServerConfig, bus: Bus, mut shutdown: Shutdown) -
     drop(alive);
 
     let mut snapshots = SnapshotReport::default();
+    if config.lockstep.is_some() {
+        // No final snapshot replaces the newest cut: it must reach the disk before the replica stops.
+        wait_for_cut_written(&ctx, restored_sequence.unwrap_or(0)).await;
+    }
     if let Some(replica) = replica {
         drop(ctx.lock().detach_replica());
         let log = tokio::task::spawn_blocking(move || replica.stop()).await?;
         (snapshots.written, snapshots.failed, snapshots.aborted) = (log.written, log.failed, log.aborted);
     }
-    if let Some(path) = config.snapshot_path.clone() {
+    // In deterministic mode the newest cut is the snapshot to resume from: a shutdown one would
+    // describe a moment no other role saved.
+    if let Some(path) = config.snapshot_path.clone().filter(|_| config.lockstep.is_none()) {
         let writing = Arc::clone(&ctx);
         match tokio::task::spawn_blocking(move || write_final(&writing, path)).await? {
             Ok(marks) => {
@@ -223,6 +229,30 @@ pub async fn run(config: ReplayServerConfig, bus: Bus, mut shutdown: Shutdown) -
     bus.close().await?;
     joined?;
     Ok(report)
+}
+
+/// Deterministic mode: waits (at most a minute) until the newest cut requested since `restored`
+/// is on disk.
+async fn wait_for_cut_written(ctx: &Ctx, restored: u64) {
+    let deadline = Instant::now() + std::time::Duration::from_secs(60);
+    loop {
+        let (wanted, log) = {
+            let service = ctx.lock();
+            (service.snapshot_sequence(), service.replica().map(|r| r.log()))
+        };
+        let Some(log) = log.filter(|_| wanted > restored) else { return };
+        if log.last_sequence >= wanted {
+            return;
+        }
+        if Instant::now() >= deadline {
+            tracing::error!(
+                sequence = wanted,
+                "deterministic mode: the newest cut was not written within a minute"
+            );
+            return;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
 }
 
 /// Restores the configured snapshot, off the async runtime (it may be half a gigabyte).

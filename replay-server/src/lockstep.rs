@@ -3,10 +3,17 @@
 //! sample needs it, in the canonical order; priority updates are queued and applied only up to the
 //! step of the previous sample request. So what a sample sees depends on the schedule alone, never
 //! on which message arrived first.
+//!
+//! At each checkpoint step `c` of the learner (a round's start) the state is cut: once every
+//! executor has delivered its blocks through `c / R` and the learner's priority updates through `c`
+//! are in, and before the sample at `c` is served, the service snapshots the buffer with this
+//! state ([`Saved`]). A run resumed from the learner's checkpoint at `c` and this snapshot
+//! continues exactly as the uninterrupted run (README "Deterministic mode").
 
 use std::collections::BTreeMap;
 
 use proto::{ExperienceBatch, PriorityUpdate, SampledBatch};
+use serde::{Deserialize, Serialize};
 
 /// What a sample request still waits for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -25,6 +32,11 @@ pub enum LockstepWait {
         /// Its learner step.
         missing: u64,
     },
+    /// The sample at a checkpoint step waits for the cut (the snapshot of the state before it).
+    Cut {
+        /// The checkpoint step.
+        at: u64,
+    },
 }
 
 impl std::fmt::Display for LockstepWait {
@@ -38,6 +50,9 @@ impl std::fmt::Display for LockstepWait {
             }
             LockstepWait::Priorities { missing } => {
                 write!(f, "deterministic mode: waiting for the priority update of learner step {missing}")
+            }
+            LockstepWait::Cut { at } => {
+                write!(f, "deterministic mode: the state at checkpoint step {at} is not saved yet")
             }
         }
     }
@@ -77,8 +92,29 @@ pub struct Lockstep {
     queued: BTreeMap<u64, PriorityUpdate>,
     /// Updates through this learner step are applied.
     applied_through: u64,
-    /// The step of the last request served, and its batch.
-    last: Option<(u64, SampledBatch)>,
+    /// The step of the last request served, and its batch (`None` after a restore).
+    last: Option<(u64, Option<SampledBatch>)>,
+    /// The last checkpoint step cut (0: none yet); `None` when cuts are off (no snapshots).
+    cut: Option<u64>,
+}
+
+/// Deterministic mode's state at a cut, saved beside the buffer in the snapshot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Saved {
+    /// The learner step of the cut.
+    pub cut: u64,
+    /// Env steps each executor had delivered through the cut's block.
+    pub progress: Vec<u64>,
+    /// The staged batches of the cut's block (and any before it not yet inserted).
+    pub staged: BTreeMap<(u64, u32), Vec<ExperienceBatch>>,
+    /// Blocks below this were in the buffer.
+    pub inserted_blocks: u64,
+    /// Priority updates queued, through the cut's step.
+    pub queued: Vec<PriorityUpdate>,
+    /// Updates through this step were applied.
+    pub applied_through: u64,
+    /// The step of the last request served.
+    pub served: Option<u64>,
 }
 
 impl Lockstep {
@@ -92,6 +128,64 @@ impl Lockstep {
             queued: BTreeMap::new(),
             applied_through: 0,
             last: None,
+            cut: None,
+        }
+    }
+
+    /// Cuts the state at every checkpoint step (snapshots are on).
+    pub fn with_cuts(mut self) -> Self {
+        self.cut = Some(self.cut.unwrap_or(0));
+        self
+    }
+
+    /// Picks up where a cut left off.
+    pub fn restore(schedule: node::Lockstep, saved: Saved) -> Self {
+        let mut restored = Self::new(schedule).with_cuts();
+        restored.progress = saved.progress;
+        restored.progress.resize(schedule.executors as usize, 0);
+        restored.staged = saved.staged;
+        restored.inserted_blocks = saved.inserted_blocks;
+        restored.queued = saved.queued.into_iter().map(|u| (u.learner_step, u)).collect();
+        restored.applied_through = saved.applied_through;
+        restored.last = saved.served.map(|step| (step, None));
+        restored.cut = Some(saved.cut);
+        restored
+    }
+
+    /// The last checkpoint step cut or restored (0 before any).
+    pub fn last_cut(&self) -> u64 {
+        self.cut.unwrap_or(0)
+    }
+
+    /// Env steps executor `id` has delivered.
+    pub fn progress(&self) -> &[u64] {
+        &self.progress
+    }
+
+    /// The next checkpoint step to cut at, if cuts are on and it is due now: every block it needs
+    /// and every priority update through it are in, and its sample is not served yet.
+    pub fn cut_due(&self) -> Option<u64> {
+        let at = self.cut? + self.schedule.checkpoint_every_updates;
+        let need = self.schedule.needed_for(at);
+        let served = self.last.as_ref().map(|(step, _)| *step);
+        let ready = self.progress.iter().all(|have| *have >= need)
+            && (self.applied_through + 1..=at).all(|s| self.queued.contains_key(&s))
+            && served.is_none_or(|s| s < at);
+        ready.then_some(at)
+    }
+
+    /// The state at checkpoint step `at` (from [`Lockstep::cut_due`]), recorded as cut.
+    pub fn cut(&mut self, at: u64) -> Saved {
+        self.cut = Some(at);
+        let (block, end) = (self.schedule.round(at), self.schedule.needed_for(at));
+        Saved {
+            cut: at,
+            progress: self.progress.iter().map(|have| (*have).min(end)).collect(),
+            staged: self.staged.range(..(block + 1, 0)).map(|(k, v)| (*k, v.clone())).collect(),
+            inserted_blocks: self.inserted_blocks,
+            queued: self.queued.range(..=at).map(|(_, u)| u.clone()).collect(),
+            applied_through: self.applied_through,
+            served: self.last.as_ref().map(|(step, _)| *step),
         }
     }
 
@@ -130,11 +224,16 @@ impl Lockstep {
     /// What the sample at `learner_step` may do now, or what it waits for.
     pub fn plan(&self, learner_step: u64) -> Result<Plan, LockstepWait> {
         let previous = match &self.last {
-            Some((served, batch)) if *served == learner_step => return Ok(Plan::Repeat(batch.clone())),
-            Some((served, _)) if *served > learner_step => return Ok(Plan::Stale { served: *served }),
+            Some((served, Some(batch))) if *served == learner_step => return Ok(Plan::Repeat(batch.clone())),
+            Some((served, _)) if *served >= learner_step => return Ok(Plan::Stale { served: *served }),
             Some((served, _)) => *served,
             None => self.applied_through,
         };
+        if let Some(cut) = self.cut
+            && learner_step >= cut + self.schedule.checkpoint_every_updates
+        {
+            return Err(LockstepWait::Cut { at: cut + self.schedule.checkpoint_every_updates });
+        }
         let need = self.schedule.needed_for(learner_step);
         if let Some((executor, &have)) = self.progress.iter().enumerate().find(|(_, have)| **have < need) {
             return Err(LockstepWait::Experience { executor: executor as u32, have, need });
@@ -161,7 +260,7 @@ impl Lockstep {
 
     /// Records the batch served for `learner_step`, for a repeat of the request.
     pub fn served(&mut self, learner_step: u64, batch: &SampledBatch) {
-        self.last = Some((learner_step, batch.clone()));
+        self.last = Some((learner_step, Some(batch.clone())));
     }
 }
 
@@ -224,6 +323,38 @@ mod tests {
         // Late and foreign batches are refused.
         assert_eq!(l.stage(batch(0, 3, 1)).unwrap_err().0, "lockstep_order");
         assert_eq!(l.stage(batch(2, 3, 1)).unwrap_err().0, "lockstep_executor");
+    }
+
+    #[test]
+    fn the_state_is_cut_at_a_checkpoint_before_its_sample_and_restored_from_the_cut() {
+        let schedule = node::Lockstep { checkpoint_every_updates: 20, ..schedule() };
+        let mut l = Lockstep::new(schedule).with_cuts();
+        // Blocks 0..=2 end at env step 10; executor 1 is already into block 3.
+        l.stage(batch(0, 10, 2)).unwrap();
+        l.stage(batch(1, 10, 2)).unwrap();
+        l.stage(batch(1, 12, 1)).unwrap();
+        for step in 1..=19 {
+            l.queue(update(step));
+        }
+        l.last = Some((16, None));
+        assert_eq!(l.cut_due(), None, "the priority update of step 20 is missing");
+        assert_eq!(l.plan(20), Err(LockstepWait::Cut { at: 20 }), "no sample at 20 before the cut");
+        l.queue(update(20));
+        assert_eq!(l.cut_due(), Some(20));
+        let saved = l.cut(20);
+        assert_eq!((saved.cut, saved.progress.clone(), saved.served), (20, vec![10, 10], Some(16)));
+        assert_eq!(
+            saved.staged.keys().copied().collect::<Vec<_>>(),
+            vec![(2, 0), (2, 1)],
+            "block 3 is not saved"
+        );
+        assert_eq!(saved.queued.len(), 20);
+        assert_eq!(l.cut_due(), None, "the next cut is at 40");
+        // Restored, the sample at 20 sees what it would have seen.
+        let restored = Lockstep::restore(schedule, saved);
+        assert_eq!(restored.last_cut(), 20);
+        assert_eq!(restored.plan(20), l.plan(20));
+        assert_eq!(restored.plan(20), Ok(Plan::Sample { priorities_through: 16, blocks_through: 2 }));
     }
 
     #[test]

@@ -119,7 +119,8 @@ pub(crate) async fn start(
     tasks.spawn(sampler::sample_loop(Arc::clone(ctx), sample, shutdown.clone()));
     tasks.spawn(sampler::state_loop(Arc::clone(ctx), state, shutdown.clone()));
     tasks.spawn(stats_loop(Arc::clone(ctx), shutdown.clone()));
-    if ctx.cfg.snapshots_enabled() && ctx.cfg.snapshot_interval_s > 0 {
+    // In deterministic mode snapshots are the schedule's cuts, never a timer's.
+    if ctx.cfg.snapshots_enabled() && ctx.cfg.snapshot_interval_s > 0 && ctx.cfg.lockstep.is_none() {
         tasks.spawn(snapshot_loop(Arc::clone(ctx), shutdown.clone()));
     }
     Ok(tasks)

@@ -141,6 +141,13 @@ impl Service {
     pub fn new(cfg: &ReplayServerConfig, buffer: ReplayBuffer, sidecar: Option<Sidecar>) -> (Self, Resumed) {
         let size = buffer.len() as u64;
         let saved = sidecar.as_ref().map(|s| (s.limiter_config, s.limiter));
+        let lockstep = match (cfg.lockstep, sidecar.as_ref().and_then(|s| s.lockstep.clone())) {
+            (Some(schedule), Some(saved)) => Some(Lockstep::restore(schedule, saved)),
+            (Some(schedule), None) if cfg.snapshots_enabled() && schedule.checkpoint_every_updates > 0 => {
+                Some(Lockstep::new(schedule).with_cuts())
+            }
+            (schedule, _) => schedule.map(Lockstep::new),
+        };
         let (limiter, resumed) = RateLimiter::resume(cfg.limiter(), saved, size);
         let (counters, rejects, streams, sequence) = match sidecar {
             Some(s) => (s.counters, Rejects::from_counts(s.rejected), s.streams, s.sequence),
@@ -167,7 +174,7 @@ impl Service {
             waiting: None,
             insert_wait: None,
             scratch: replay::SampledBatch::new(),
-            lockstep: cfg.lockstep.map(Lockstep::new),
+            lockstep,
         };
         (service, resumed)
     }
@@ -266,6 +273,29 @@ impl Service {
         self.lockstep.is_some()
     }
 
+    /// Deterministic mode's state: the last checkpoint step cut (or restored) and each executor's
+    /// env steps delivered; `None` in normal mode.
+    pub fn lockstep_state(&self) -> Option<(u64, &[u64])> {
+        self.lockstep.as_ref().map(|l| (l.last_cut(), l.progress()))
+    }
+
+    /// Deterministic mode: snapshots the state at the next checkpoint step once it is complete.
+    fn cut_if_due(&mut self) {
+        let Some(lockstep) = self.lockstep.as_mut() else { return };
+        let Some(at) = lockstep.cut_due() else { return };
+        let saved = lockstep.cut(at);
+        let mut sidecar = self.next_sidecar(node::unix_ms());
+        sidecar.lockstep = Some(saved);
+        tracing::info!(
+            learner_step = at,
+            sequence = sidecar.sequence,
+            "deterministic mode: state cut, snapshot requested"
+        );
+        if let Some(replica) = &self.replica {
+            replica.send(Op::Snapshot(Box::new(sidecar)));
+        }
+    }
+
     /// Checks a decoded batch against the task and limits and inserts it, or in deterministic mode
     /// stages it until its round.
     fn insert_checked(&mut self, batch: ExperienceBatch, now: Instant) -> Result<u64, Rejection> {
@@ -273,7 +303,10 @@ impl Service {
         let Some(lockstep) = self.lockstep.as_mut() else { return Ok(self.insert(batch)) };
         let n = batch.len() as u64;
         match lockstep.stage(batch) {
-            Ok(()) => Ok(n),
+            Ok(()) => {
+                self.cut_if_due();
+                Ok(n)
+            }
             Err((reason, detail)) => {
                 Err(self.rejected(Rejection { input: Input::Experience, reason, detail }, now))
             }
@@ -337,6 +370,7 @@ impl Service {
         if let Some(lockstep) = self.lockstep.as_mut() {
             // Applied when the sample that must see it is served (`lockstep.rs`).
             lockstep.queue(update);
+            self.cut_if_due();
             return Ok(UpdateOutcome::default());
         }
         self.apply_priorities(update, now)
@@ -400,6 +434,7 @@ impl Service {
     /// Deterministic mode's sample: once the round's blocks and the previous request's priorities
     /// are in, applies those, inserts these in the canonical order, and samples.
     fn try_sample_lockstep(&mut self, request: &SampleRequest) -> SampleOutcome {
+        self.cut_if_due();
         let Some(lockstep) = self.lockstep.as_mut() else { return self.sample(request) };
         let (priorities_through, blocks_through) = match lockstep.plan(request.learner_step) {
             Err(wait) => return SampleOutcome::Blocked(Blocked::Lockstep(wait)),
@@ -519,6 +554,7 @@ impl Service {
             limiter: self.limiter.counters(),
             seed: self.limits.seed,
             streams: self.streams.clone(),
+            lockstep: None,
         }
     }
 

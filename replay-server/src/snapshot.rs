@@ -35,9 +35,9 @@ use crate::streams::Streams;
 /// First bytes of a server snapshot.
 pub const SERVER_SNAPSHOT_MAGIC: [u8; 8] = *b"RLRSERVE";
 /// Format version of the server part; the buffer part carries `replay::SNAPSHOT_VERSION`.
-pub const SERVER_SNAPSHOT_VERSION: u32 = 2;
+pub const SERVER_SNAPSHOT_VERSION: u32 = 3;
 /// Largest sidecar read back: it holds counters and rejection reasons, a few KiB at most.
-const MAX_SIDECAR_BYTES: u32 = 1 << 20;
+const MAX_SIDECAR_BYTES: u32 = 1 << 26;
 
 /// The server's state beside the buffer, saved with it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -59,6 +59,38 @@ pub struct Sidecar {
     /// Decided batches per executor stream, as of the buffer saved with this sidecar: what the
     /// snapshot makes durable ([`proto::DurableMarks`]).
     pub streams: Streams,
+    /// Deterministic mode's state at the cut this snapshot is (`None` in normal mode).
+    pub lockstep: Option<crate::lockstep::Saved>,
+}
+
+/// Version 2's sidecar (before deterministic mode), read and upgraded.
+#[derive(Deserialize)]
+struct SidecarV2 {
+    sequence: u64,
+    unix_ms: u64,
+    counters: ServiceCounters,
+    rejected: BTreeMap<String, u64>,
+    limiter_config: LimiterConfig,
+    limiter: LimiterCounters,
+    seed: u64,
+    streams: Streams,
+}
+
+impl From<SidecarV2> for Sidecar {
+    fn from(v2: SidecarV2) -> Self {
+        let SidecarV2 { sequence, unix_ms, counters, rejected, limiter_config, limiter, seed, streams } = v2;
+        Sidecar {
+            sequence,
+            unix_ms,
+            counters,
+            rejected,
+            limiter_config,
+            limiter,
+            seed,
+            streams,
+            lockstep: None,
+        }
+    }
 }
 
 impl Sidecar {
@@ -127,7 +159,7 @@ pub fn read_from<R: Read>(
     }
     let word = |at: usize| u32::from_le_bytes([header[at], header[at + 1], header[at + 2], header[at + 3]]);
     let version = word(8);
-    if version != SERVER_SNAPSHOT_VERSION {
+    if version != SERVER_SNAPSHOT_VERSION && version != 2 {
         return Err(SnapshotFileError::UnsupportedVersion {
             found: version,
             supported: SERVER_SNAPSHOT_VERSION,
@@ -142,9 +174,12 @@ pub fn read_from<R: Read>(
     if crc32fast::hash(&encoded) != crc {
         return Err(SnapshotFileError::Sidecar("checksum mismatch".into()));
     }
-    let (sidecar, used): (Sidecar, usize) =
-        bincode::serde::decode_from_slice(&encoded, bincode::config::standard())
-            .map_err(|e| SnapshotFileError::Sidecar(e.to_string()))?;
+    let decoded = match version {
+        2 => bincode::serde::decode_from_slice::<SidecarV2, _>(&encoded, bincode::config::standard())
+            .map(|(v2, used)| (Sidecar::from(v2), used)),
+        _ => bincode::serde::decode_from_slice(&encoded, bincode::config::standard()),
+    };
+    let (sidecar, used) = decoded.map_err(|e| SnapshotFileError::Sidecar(e.to_string()))?;
     if used != encoded.len() {
         return Err(SnapshotFileError::Sidecar("trailing bytes".into()));
     }
@@ -298,7 +333,38 @@ mod tests {
                 streams.record(3, 77, 0);
                 streams
             },
+            lockstep: None,
         }
+    }
+
+    #[test]
+    fn a_version_2_snapshot_is_read_and_a_cut_round_trips() {
+        // Version 2 is version 3 without the trailing `lockstep` (bincode writes None as one 0 byte).
+        let mut v3 = bincode::serde::encode_to_vec(sidecar(), bincode::config::standard()).unwrap();
+        assert_eq!(v3.pop(), Some(0));
+        let mut bytes = Vec::new();
+        bytes.extend_from_slice(&SERVER_SNAPSHOT_MAGIC);
+        bytes.extend_from_slice(&2u32.to_le_bytes());
+        bytes.extend_from_slice(&(v3.len() as u32).to_le_bytes());
+        bytes.extend_from_slice(&crc32fast::hash(&v3).to_le_bytes());
+        bytes.extend_from_slice(&v3);
+        filled().write_snapshot(&mut bytes).unwrap();
+        let (_, side) = read_from(&mut &bytes[..], cfg(), DIMS).unwrap();
+        assert_eq!(side, sidecar());
+        // A deterministic cut travels with the sidecar.
+        let saved = crate::lockstep::Saved {
+            cut: 500,
+            progress: vec![1250, 1250],
+            staged: BTreeMap::new(),
+            inserted_blocks: 20,
+            queued: vec![],
+            applied_through: 492,
+            served: Some(496),
+        };
+        let with_cut = Sidecar { lockstep: Some(saved), ..sidecar() };
+        let mut bytes = Vec::new();
+        write_to(&mut bytes, &filled(), &with_cut).unwrap();
+        assert_eq!(read_from(&mut &bytes[..], cfg(), DIMS).unwrap().1, with_cut);
     }
 
     #[test]

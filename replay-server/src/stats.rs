@@ -121,6 +121,12 @@ pub fn build(service: &Service, inputs: &ReportInputs<'_>) -> StatsReport {
         metric(&format!("refused_total.{key}"), *n as f64);
     }
     metric("rejected_total", service.rejects().total() as f64);
+    if let Some((cut, progress)) = service.lockstep_state() {
+        metric("lockstep.cut", cut as f64);
+        for (id, env_steps) in progress.iter().enumerate() {
+            metric(&format!("lockstep.progress.{id}"), *env_steps as f64);
+        }
+    }
     metric("memory_planned_bytes", inputs.memory_planned_bytes as f64);
     if let Some(replica) = service.replica() {
         metric("replica_lag_bytes", replica.lag_bytes() as f64);

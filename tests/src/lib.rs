@@ -68,18 +68,25 @@ impl Spec {
 
 impl Spec {
     /// [`Spec::tiny`] in deterministic mode: rounds of 25 updates (the tiny weights period), 10 env
-    /// steps per executor per round, no evaluations; the learner stops at `max_updates` and
-    /// checkpoints into `dir`.
+    /// steps per executor per round, no evaluations; the learner checkpoints into `dir` every 500
+    /// updates and stops at `max_updates`, and the replay server cuts its state into `dir` at each
+    /// checkpoint, so the run resumes from `dir`.
     pub fn tiny_deterministic(run_id: &str, executors: u32, dir: &std::path::Path, max_updates: u64) -> Spec {
         let mut spec = Spec::tiny(run_id, executors);
+        let path = |name: &str| format!("{:?}", dir.join(name).display().to_string());
         let learner = format!(
-            "[learner]\nmax_updates = {max_updates}\ncheckpoint_dir = {:?}\n",
-            dir.join("checkpoints").display().to_string()
+            "[learner]\nmax_updates = {max_updates}\ncheckpoint_dir = {}\ncheckpoint_every_epochs = 5\n",
+            path("checkpoints")
+        );
+        let replay = format!(
+            "[replay_server]\nsnapshot_path = {}\nsnapshot_log_budget_bytes = 16777216\n",
+            path("replay.snap")
         );
         spec.config = spec
             .config
             .replace("[train]\n", "[train]\ndeterministic = true\n")
             .replace("[learner]\n", &learner)
+            .replace("[replay_server]\n", &replay)
             .replace("eval_episodes = 1", "eval_episodes = 0");
         spec.config.push_str(&format!(
             "\n[lockstep]\nexecutors = {executors}\nwarm_up_transitions = 300\nupdates_per_round = 25\n\

@@ -73,6 +73,11 @@ impl Hindsight {
         });
     }
 
+    /// Restarts the relabelling stream from `seed` (as [`Hindsight::new`] seeds it).
+    pub fn reseed(&mut self, seed: u64) {
+        self.rng = StdRng::seed_from_u64(seed);
+    }
+
     /// Steps kept for the current episode.
     pub fn len(&self) -> usize {
         self.episode.len()
