@@ -1,14 +1,16 @@
 //! Snapshots: the whole buffer (contents, priorities, counters) as one versioned, checksummed
 //! byte stream to any `Write` and from any `Read`; the replay server puts it in its snapshot file.
 //!
-//! Format (version 2, little-endian): magic `RLREPLAY`, u32 version, then u64 obs_dim, act_dim,
+//! Format (version 3, little-endian): magic `RLREPLAY`, u32 version, then u64 obs_dim, act_dim,
 //! capacity, observation rows, f64 α, ε, then u64 head, tail, rows written, evicted early,
-//! sampled, updates applied, updates stale; then the arrays: N f64 priorities, N × act_dim f32
-//! actions, N f32 rewards, N u8 terminated, N u32 next-row positions, M × obs_dim f32 rows; then
-//! the u32 CRC-32 (`crc32fast`, the checksum of every other file and message of the project) of
-//! everything before it; version 1 ended in a hand-rolled 64-bit checksum and is refused. Sizes
-//! follow from the header, so a short stream fails with `UnexpectedEof` and a long one leaves its
-//! tail unread.
+//! sampled, updates applied, updates stale; then the arrays over the n = min(head, N) slots and
+//! m = min(rows written, M) rows ever written (the rest of the rings are zero, as a new buffer's):
+//! n f64 priorities, n × act_dim f32 actions, n f32 rewards, n u8 terminated, n u32 next-row
+//! positions, m × obs_dim f32 rows; then the u32 CRC-32 (`crc32fast`, the checksum of every other
+//! file and message of the project) of everything before it. Version 2, the same with whole rings
+//! (a buffer filling up wrote mostly zeros: 480 MB for the Ant's first 74,000 transitions), is
+//! still read; version 1 ended in a hand-rolled 64-bit checksum and is refused. Sizes follow from
+//! the header, so a short stream fails with `UnexpectedEof` and a long one leaves its tail unread.
 //!
 //! Restoring rebuilds the sum tree from the leaves; since every node is a pure function of the
 //! leaves (see `sum_tree`), the restored tree is bit-identical and sampling from it with the same
@@ -25,8 +27,10 @@ use crate::sum_tree::SumTree;
 
 /// First bytes of every snapshot.
 pub const SNAPSHOT_MAGIC: [u8; 8] = *b"RLREPLAY";
-/// The format version this build writes and reads.
-pub const SNAPSHOT_VERSION: u32 = 2;
+/// The format version this build writes (it reads version 2 too).
+pub const SNAPSHOT_VERSION: u32 = 3;
+/// The last version that wrote whole rings.
+const WHOLE_RINGS_VERSION: u32 = 2;
 
 /// Values per encoded chunk: bounds the staging buffer at 128 KiB for any snapshot size.
 const CHUNK: usize = 16 * 1024;
@@ -98,10 +102,16 @@ impl ReplayBuffer {
     /// Writes the buffer as a snapshot (see the module doc for the format). Wrap `w` in a
     /// `BufWriter` if it is unbuffered.
     pub fn write_snapshot<W: Write>(&self, w: &mut W) -> Result<(), SnapshotError> {
+        self.write_snapshot_version(w, SNAPSHOT_VERSION)
+    }
+
+    /// Writes format `version` (this one, or version 2 for the tests that read it).
+    fn write_snapshot_version<W: Write>(&self, w: &mut W, version: u32) -> Result<(), SnapshotError> {
         let s = &self.storage;
+        let written = Written::of(s, version);
         let mut e = Encoder { w, sum: crc32fast::Hasher::new(), staging: Vec::new() };
         e.bytes(&SNAPSHOT_MAGIC)?;
-        e.bytes(&SNAPSHOT_VERSION.to_le_bytes())?;
+        e.bytes(&version.to_le_bytes())?;
         for v in [s.dims.obs_dim as u64, s.dims.act_dim as u64, s.capacity as u64, s.row_capacity as u64] {
             e.u64(v)?;
         }
@@ -118,12 +128,14 @@ impl ReplayBuffer {
         ] {
             e.u64(v)?;
         }
-        e.array(&self.tree.leaf_values()[..s.capacity], f64::to_le_bytes)?;
-        e.array(&s.actions, f32::to_le_bytes)?;
-        e.array(&s.rewards, f32::to_le_bytes)?;
-        e.array(&s.terminated, |t| [u8::from(t)])?;
-        e.array(&s.next_rows, u32::to_le_bytes)?;
-        e.array(&s.rows, f32::to_le_bytes)?;
+        let (n, m) = (written.slots, written.rows);
+        let (act, obs) = (s.dims.act_dim, s.dims.obs_dim);
+        e.array(&self.tree.leaf_values()[..n], f64::to_le_bytes)?;
+        e.array(&s.actions[..n * act], f32::to_le_bytes)?;
+        e.array(&s.rewards[..n], f32::to_le_bytes)?;
+        e.array(&s.terminated[..n], |t| [u8::from(t)])?;
+        e.array(&s.next_rows[..n], u32::to_le_bytes)?;
+        e.array(&s.rows[..m * obs], f32::to_le_bytes)?;
         let checksum = std::mem::take(&mut e.sum).finalize();
         e.w.write_all(&checksum.to_le_bytes())?;
         e.w.flush()?;
@@ -140,7 +152,7 @@ impl ReplayBuffer {
             return Err(SnapshotError::BadMagic);
         }
         let version = u32::from_le_bytes(d.bytes()?);
-        if version != SNAPSHOT_VERSION {
+        if version != SNAPSHOT_VERSION && version != WHOLE_RINGS_VERSION {
             return Err(SnapshotError::UnsupportedVersion { found: version, supported: SNAPSHOT_VERSION });
         }
         let (obs_dim, act_dim) = (d.u64()?, d.u64()?);
@@ -165,21 +177,24 @@ impl ReplayBuffer {
         }
         let [head, tail, rows_written, evicted_early, sampled_total, updates_applied, updates_stale] =
             counters;
+        (storage.head, storage.rows_written) = (head, rows_written);
+        let written = Written::of(&storage, version);
+        let (n, m) = (written.slots, written.rows);
+        let (act, obs) = (dims.act_dim, dims.obs_dim);
         let mut priorities = vec![0.0; storage.capacity];
-        d.array(&mut priorities, f64::from_le_bytes)?;
-        d.array(&mut storage.actions, f32::from_le_bytes)?;
-        d.array(&mut storage.rewards, f32::from_le_bytes)?;
-        d.array(&mut storage.terminated, |[b]| b != 0)?;
-        d.array(&mut storage.next_rows, u32::from_le_bytes)?;
-        d.array(&mut storage.rows, f32::from_le_bytes)?;
+        d.array(&mut priorities[..n], f64::from_le_bytes)?;
+        d.array(&mut storage.actions[..n * act], f32::from_le_bytes)?;
+        d.array(&mut storage.rewards[..n], f32::from_le_bytes)?;
+        d.array(&mut storage.terminated[..n], |[b]| b != 0)?;
+        d.array(&mut storage.next_rows[..n], u32::from_le_bytes)?;
+        d.array(&mut storage.rows[..m * obs], f32::from_le_bytes)?;
         let expected_sum = std::mem::take(&mut d.sum).finalize();
         let mut found = [0; 4];
         d.r.read_exact(&mut found)?;
         if u32::from_le_bytes(found) != expected_sum {
             return Err(SnapshotError::ChecksumMismatch);
         }
-        (storage.head, storage.tail, storage.rows_written, storage.evicted_early) =
-            (head, tail, rows_written, evicted_early);
+        (storage.tail, storage.evicted_early) = (tail, evicted_early);
         check_invariants(&storage, &priorities)?;
         let mut tree = SumTree::new(storage.capacity);
         tree.fill(0, &priorities);
@@ -187,6 +202,23 @@ impl ReplayBuffer {
         (buffer.sampled_total, buffer.updates_applied, buffer.updates_stale) =
             (sampled_total, updates_applied, updates_stale);
         Ok(buffer)
+    }
+}
+
+/// How much of the rings a snapshot holds: the slots and rows ever written (all of them in
+/// version 2). Nothing past them was ever written, so they are zero, as in a new buffer.
+struct Written {
+    slots: usize,
+    rows: usize,
+}
+
+impl Written {
+    fn of(s: &Storage, version: u32) -> Self {
+        if version == WHOLE_RINGS_VERSION {
+            return Self { slots: s.capacity, rows: s.row_capacity };
+        }
+        let prefix = |written: u64, ring: usize| usize::try_from(written).map_or(ring, |w| w.min(ring));
+        Self { slots: prefix(s.head, s.capacity), rows: prefix(s.rows_written, s.row_capacity) }
     }
 }
 

@@ -101,6 +101,40 @@ fn an_empty_buffer_round_trips() {
 }
 
 #[test]
+fn a_filling_buffer_writes_only_what_it_holds_and_round_trips() {
+    let mut b = ReplayBuffer::new(config(), DIMS).unwrap();
+    let empty = bytes_of(&b).len();
+    let batch = OwnedBatch::run(DIMS, 0, 0, 5).with_td(vec![1.0, 2.0, 3.0, 4.0, 5.0]);
+    b.insert_batch(batch.batch()).unwrap();
+    let bytes = bytes_of(&b);
+    // 5 slots (priority, 3 actions, reward, flag, next row) and the 6 rows of one 5-step episode.
+    let slot = 8 + 3 * 4 + 4 + 1 + 4;
+    assert_eq!(bytes.len(), empty + 5 * slot + 6 * 4 * 4);
+    let restored = restore(&bytes).unwrap();
+    assert_same(&b, &restored);
+    assert_eq!(bytes_of(&restored), bytes);
+    // The wrapped buffer holds whole rings.
+    let full = bytes_of(&used_buffer()).len();
+    assert_eq!(full, empty + 50 * slot + 70 * 4 * 4);
+}
+
+#[test]
+fn a_version_2_snapshot_with_whole_rings_is_read() {
+    for original in [used_buffer(), {
+        let mut b = ReplayBuffer::new(config(), DIMS).unwrap();
+        b.insert_batch(OwnedBatch::run(DIMS, 1, 0, 3).batch()).unwrap();
+        b
+    }] {
+        let mut v2 = Vec::new();
+        original.write_snapshot_version(&mut v2, 2).unwrap();
+        assert_eq!(v2[8..12], 2u32.to_le_bytes());
+        let restored = restore(&v2).unwrap();
+        assert_same(&original, &restored);
+        assert_eq!(bytes_of(&restored), bytes_of(&original));
+    }
+}
+
+#[test]
 fn corruption_and_truncation_are_detected() {
     let bytes = bytes_of(&used_buffer());
     // Flip one bit at several places past the header: the checksum catches each.
@@ -128,8 +162,8 @@ fn other_formats_versions_dims_and_settings_are_rejected() {
     // Version 1, the format before the CRC-32 trailer, is refused by name, not as a bad checksum.
     version[8..12].copy_from_slice(&1u32.to_le_bytes());
     let err = restore(&version).unwrap_err();
-    assert!(matches!(err, SnapshotError::UnsupportedVersion { found: 1, supported: 2 }));
-    assert_eq!(err.to_string(), "snapshot format version 1 is not supported (this build reads 2)");
+    assert!(matches!(err, SnapshotError::UnsupportedVersion { found: 1, supported: 3 }));
+    assert_eq!(err.to_string(), "snapshot format version 1 is not supported (this build reads 3)");
     let other = Dims { obs_dim: 5, act_dim: 3 };
     let other_cfg = ReplayBuffer::read_snapshot(&mut &bytes[..], config(), other).unwrap_err();
     assert_eq!(
