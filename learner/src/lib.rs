@@ -49,7 +49,7 @@ pub use checkpoint::CheckpointDir;
 pub use config::{LearnerConfig, LearnerSettings};
 pub use evaluate::{Episode, Evaluation, evaluate, prepare_latent, run_episode, run_episode_watched};
 pub use fetch::{FetchStatus, Fetcher, Requests, Waiting};
-use node::{Bus, Shutdown};
+use node::{Bus, CutWait, Shutdown};
 use proto::{EvalMode, EvalReport};
 use tokio::sync::mpsc;
 pub use updater::{Frozen, LossMeans, Out, Progress, Updater, UpdaterReport};
@@ -208,6 +208,10 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
             },
         }
     }
+    // Nothing reads the announcements from here on: undrained, their queue fills, zenoh's callback
+    // then blocks a runtime thread and closing the session times out (seen after a long wait for
+    // deterministic mode's last cut).
+    drop(announcements);
     // Stop the request loops; the update thread then sees its batches end, publishes its final
     // weights and checkpoint, and hangs up.
     for request_loop in &loops {
@@ -232,17 +236,21 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     if let Some(schedule) = config.lockstep.filter(|l| l.is_cut(last) && last > updater.start_step) {
         // The replay server cuts its state here once the executors' blocks are in: wait for it, so
         // that a launcher stopping everything when this process ends leaves a resumable run.
-        let cut = node::Cut::wait_for(&bus, last, Duration::from_secs(60), shutdown.clone()).await?;
         let every = schedule.checkpoint_every_updates;
-        match cut {
-            true => {
+        match node::Cut::wait_for(&bus, last, Duration::from_secs(60), shutdown.clone()).await? {
+            CutWait::Cut => {
                 tracing::info!(step = last, "deterministic mode: every role's state is saved at this step")
             }
-            false => tracing::warn!(
+            CutWait::NoCuts => tracing::info!(
+                step = last,
+                "deterministic mode: the replay server has no snapshot_path, so this run cannot be resumed"
+            ),
+            CutWait::TimedOut => tracing::warn!(
                 step = last,
                 every,
-                "deterministic mode: the replay server did not cut its state here in time (does it have a snapshot_path?)"
+                "deterministic mode: the replay server did not cut its state here within 60 s"
             ),
+            CutWait::Stopped => {}
         }
     }
     let report = Report {

@@ -1,7 +1,8 @@
 //! What every process needs to join a run on the bus: command-line options ([`NodeArgs`]), the zenoh
 //! session scoped to a run id ([`Bus`]), a shutdown signal that tests can trigger ([`Shutdown`]),
 //! tracing set-up ([`telemetry`]), per-crate TOML config tables ([`config`]), deterministic mode's
-//! schedule ([`lockstep`]) and atomic, durable file writes ([`durable`]).
+//! schedule ([`lockstep`]) and where such a run resumes ([`Cut`]), and atomic, durable file
+//! writes ([`durable`]).
 //!
 //! A role binary is a thin `main` over its library's `run(cfg, bus, shutdown)`; [`launch`] is that
 //! `main`, written once for all roles.
@@ -27,7 +28,7 @@ pub use args::{BusConfig, NodeArgs, ZenohMode};
 pub use bus::{Bus, DEFAULT_QUEUE, decode_payload};
 pub use clock::unix_ms;
 pub use config::{HierarchyKeys, RoleConfig, RunKeys};
-pub use cut::Cut;
+pub use cut::{Cut, CutWait};
 pub use endpoints::{Delivery, Incoming, Keyed, Publisher, Queryable, Subscriber};
 pub use error::NodeError;
 pub use faults::{Direction, Fault, Faults};

@@ -157,6 +157,11 @@ impl Lockstep {
         self.cut.unwrap_or(0)
     }
 
+    /// Whether it cuts the state at checkpoint steps (only with snapshots: what a run resumes from).
+    pub fn cuts(&self) -> bool {
+        self.cut.is_some()
+    }
+
     /// Env steps executor `id` has delivered.
     pub fn progress(&self) -> &[u64] {
         &self.progress

@@ -275,8 +275,8 @@ impl Service {
 
     /// Deterministic mode's state: the last checkpoint step cut (or restored) and each executor's
     /// env steps delivered; `None` in normal mode.
-    pub fn lockstep_state(&self) -> Option<(u64, &[u64])> {
-        self.lockstep.as_ref().map(|l| (l.last_cut(), l.progress()))
+    pub fn lockstep_state(&self) -> Option<&Lockstep> {
+        self.lockstep.as_ref()
     }
 
     /// Deterministic mode: snapshots the state at the next checkpoint step once it is complete.
