@@ -27,8 +27,9 @@
 # executors, the learner and the replay server follow [lockstep]'s schedule, so the same run file
 # and seed give bit-identical parameters, and the replay server snapshots its state at every
 # learner checkpoint into runs/<run-id>/replay.snap, so that the same RUN_ID resumes exactly from
-# the last checkpoint (README "Deterministic mode"). At the end local.sh prints the SHA-256 of the
-# newest learner checkpoint either way.
+# the last checkpoint (README "Deterministic mode"); a run file with deterministic = true gets the
+# same. There a role that dies restarts the whole run from its last cut (one role cannot rejoin the
+# others off it). At the end local.sh prints the SHA-256 of the newest learner checkpoint either way.
 # AUTH=1: an authenticated run: deploy/certs.sh makes runs/<run-id>/auth/ (a CA of the run's own, a
 # certificate per role, and per role a zenoh config with mutual TLS and access control), every role
 # talks over tls/ endpoints with its role's certificate, and only the learner may publish weights,
@@ -67,10 +68,14 @@ auth() {
 export SACLSP_CHECKPOINT_DIR="$dir/checkpoints"
 # Deterministic mode's executor set is the one started here (read only in that mode).
 export SACLSP_EXECUTORS=$n
-if [[ ${DETERMINISTIC:-0} == 1 ]]; then
+# Deterministic mode: DETERMINISTIC=1, or the run file's [train] deterministic = true unless
+# SACLSP_DETERMINISTIC says otherwise (set by hand, it decides alone, and gives no replay snapshot).
+if [[ ${DETERMINISTIC:-0} == 1 ]] || { [[ -z ${SACLSP_DETERMINISTIC:-} ]] &&
+    grep -Eq '^[[:space:]]*deterministic[[:space:]]*=[[:space:]]*true' "$config"; }; then
     # The replay server's snapshot holds its state at each checkpoint: what the run resumes from.
     export SACLSP_DETERMINISTIC=1 SACLSP_REPLAY_SNAPSHOT="$dir/replay.snap"
 fi
+deterministic=${SACLSP_DETERMINISTIC:-0}
 if [[ ${DURABLE:-0} == 1 ]]; then
     export SACLSP_REPLAY_SNAPSHOT="$dir/replay.snap" SACLSP_SPOOL_DIR="$dir/spool"
 fi
@@ -89,7 +94,9 @@ fi
 # Moves the learner's update thread onto its core and renices its evaluation thread, once they exist.
 place_learner_threads() {
     local pid=$1 placed=0
-    for _ in $(seq 200); do
+    # Up to 20 s: a resuming learner first loads its checkpoint (and in deterministic mode asks the
+    # replay server, itself loading its snapshot, where to resume).
+    for _ in $(seq 400); do
         kill -0 "$pid" 2>/dev/null || return 0 # it died; the main loop reports it
         for task in /proc/"$pid"/task/*; do
             case $(cat "$task/comm" 2>/dev/null) in
@@ -159,7 +166,8 @@ stop_all() {
 trap 'echo "local.sh: stopping $run_id" >&2; stop_all; exit 130' INT TERM
 
 echo "local.sh: run $run_id, $n executors, run file $config, logs in $dir/" >&2
-for role in replay-server param-server learner $(seq -f 'executor-%g' 0 $((n - 1))) monitor; do
+roles=(replay-server param-server learner $(seq -f 'executor-%g' 0 $((n - 1))) monitor)
+for role in "${roles[@]}"; do
     launch "$role"
 done
 echo "local.sh: live view: $bin/sac-lsp monitor --run-id $run_id --connect $hub --out $dir/view.jsonl --no-tensorboard $(auth monitor)" >&2
@@ -169,8 +177,9 @@ deadline=""
 max_restarts=${RESTARTS:-${EXECUTOR_RESTARTS:-5}}
 while true; do
     now=$(date +%s)
-    for name in "${!due[@]}"; do
-        if [[ ${due[$name]} -le $now ]]; then
+    # In launch order: a whole deterministic run restarting starts its replay server first.
+    for name in "${roles[@]}"; do
+        if [[ -n ${due[$name]:-} && ${due[$name]} -le $now ]]; then
             unset "due[$name]"
             launch "$name"
         fi
@@ -200,8 +209,19 @@ while true; do
         fi
         wait_s=$((1 << (count - 1)))
         [[ $wait_s -gt 30 ]] && wait_s=30
-        due[$name]=$((now + wait_s))
         echo "$now restart $name $count $status" >>"$dir/supervisor.log"
+        if [[ $deterministic == 1 && $name != monitor ]]; then
+            # A deterministic run's roles agree on one cut; one role cannot rejoin the others off it,
+            # so the whole run restarts from its newest cut.
+            echo "local.sh: restart $count of $name: deterministic mode restarts the whole run from its last cut in $wait_s s" >&2
+            stop_all
+            pids=()
+            for role in "${roles[@]}"; do
+                due[$role]=$((now + wait_s))
+            done
+            break
+        fi
+        due[$name]=$((now + wait_s))
         echo "local.sh: restart $count of $name in $wait_s s (from its own state); the others go on" >&2
     done
     if [[ -n $deadline && $now -ge $deadline ]]; then
