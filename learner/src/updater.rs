@@ -234,6 +234,13 @@ impl Updater {
                     non_finite_warned = Some(Instant::now());
                 }
             }
+            let epoch_end = step.is_multiple_of(s.epoch_length_updates);
+            let epoch = step / s.epoch_length_updates;
+            if epoch_end && s.checkpoint_every_epochs > 0 && epoch.is_multiple_of(s.checkpoint_every_epochs) {
+                // Before this update's priorities: deterministic mode's replay server cuts its state
+                // at a checkpoint step once they arrive, so no cut exists without its checkpoint.
+                self.checkpoint(&mut report);
+            }
             if s.send_priorities {
                 let td_errors = out.td_errors.iter().map(|d| d.abs()).collect();
                 let update = PriorityUpdate {
@@ -252,17 +259,13 @@ impl Updater {
             if step.is_multiple_of(s.announce_every_updates) {
                 self.send(Out::Step(LearnerStep { learner_step: step, weights_version, starved: false }));
             }
-            if step.is_multiple_of(s.epoch_length_updates) {
-                let epoch = step / s.epoch_length_updates;
-                if let Some(eval) = self.eval.as_ref().filter(|_| epoch.is_multiple_of(s.eval_every_epochs)) {
-                    match eval.try_send((epoch, self.learner.snapshot()?)) {
-                        Ok(()) => {}
-                        Err(TrySendError::Full(_)) => evals_skipped += 1,
-                        Err(TrySendError::Disconnected(_)) => self.eval = None,
-                    }
-                }
-                if s.checkpoint_every_epochs > 0 && epoch.is_multiple_of(s.checkpoint_every_epochs) {
-                    self.checkpoint(&mut report);
+            if epoch_end
+                && let Some(eval) = self.eval.as_ref().filter(|_| epoch.is_multiple_of(s.eval_every_epochs))
+            {
+                match eval.try_send((epoch, self.learner.snapshot()?)) {
+                    Ok(()) => {}
+                    Err(TrySendError::Full(_)) => evals_skipped += 1,
+                    Err(TrySendError::Disconnected(_)) => self.eval = None,
                 }
             }
             if window_start.elapsed() >= stats_every {
