@@ -253,7 +253,19 @@ impl Rollout {
             is_weights: None,
         };
         let td_errors = self.actor.td_errors(&batch)?.iter().map(|d| d.abs()).collect();
-        let experience = ExperienceBatch {
+        Ok(Some(self.next_batch(transitions, td_errors)))
+    }
+
+    /// A batch without transitions that says "every step up to now is sent" (deterministic mode's
+    /// block end, when the block's last steps made no transition to send).
+    pub fn marker(&mut self) -> ExperienceBatch {
+        let (obs_dim, act_dim) = (self.pending.obs_dim, self.pending.act_dim);
+        self.next_batch(Transitions::with_capacity(obs_dim, act_dim, 0), Vec::new())
+    }
+
+    /// The stream's next batch: this executor's ids, the next sequence number, the env steps so far.
+    fn next_batch(&mut self, transitions: Transitions, td_errors: Vec<f32>) -> ExperienceBatch {
+        let batch = ExperienceBatch {
             executor_id: self.executor_id,
             stream: self.stream,
             seq: self.seq,
@@ -263,24 +275,7 @@ impl Rollout {
             td_errors,
         };
         self.seq += 1;
-        Ok(Some(experience))
-    }
-
-    /// A batch without transitions that says "every step up to now is sent" (deterministic mode's
-    /// block end, when the block's last steps made no transition to send).
-    pub fn marker(&mut self) -> ExperienceBatch {
-        let (obs_dim, act_dim) = (self.pending.obs_dim, self.pending.act_dim);
-        let marker = ExperienceBatch {
-            executor_id: self.executor_id,
-            stream: self.stream,
-            seq: self.seq,
-            weights_version: self.actor.version().unwrap_or(0),
-            env_steps: self.env_steps,
-            transitions: Transitions::with_capacity(obs_dim, act_dim, 0),
-            td_errors: Vec::new(),
-        };
-        self.seq += 1;
-        marker
+        batch
     }
 }
 
