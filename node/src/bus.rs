@@ -7,6 +7,7 @@ use zenoh::bytes::ZBytes;
 use zenoh::handlers::FifoChannel;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::qos::CongestionControl;
+use zenoh::query::ConsolidationMode;
 
 use crate::endpoints::{Delivery, Publisher, Queryable, Subscriber, let_out};
 use crate::faults::Faults;
@@ -167,7 +168,12 @@ impl Bus {
         }
         let key = topic.key(&self.run);
         let selector = if parameters.is_empty() { key } else { format!("{key}?{parameters}") };
-        let mut get = self.session.get(selector).express(true).timeout(timeout);
+        // No consolidation: the first reply is delivered when it arrives. The default holds replies
+        // until every peer the query went to has finished, so one peer that never finishes (seen
+        // with access control, a query sent to another executor too) withheld the param server's
+        // answer until the timeout, every time.
+        let mut get =
+            self.session.get(selector).express(true).consolidation(ConsolidationMode::None).timeout(timeout);
         if let Some(payload) = payload {
             get = get.payload(payload);
         }

@@ -272,9 +272,15 @@ fn run_cluster(ns: &Namespaces, dir: &Path, transport: Transport, rogues: Vec<Ro
         );
     }
     let rogue_exe = env!("CARGO_BIN_EXE_bus-rogue");
+    let rogue_listen = transport.endpoint("10.213.1.3:0");
     let mut rogue_procs = Vec::new();
     for rogue in &rogues {
-        let mut args: Vec<&str> = vec!["--run-id", "netns", "--connect", &hub, "--connect", &param];
+        // Listening on TLS only: on zenoh's default (plain TCP on every address) the param server's
+        // gossip-driven connect to it could win over its own TLS connect, leaving one link without a
+        // certificate, on which the access control denies everything (the rogue then never reached
+        // the param server, and the test showed nothing).
+        let mut args: Vec<&str> =
+            vec!["--run-id", "netns", "--connect", &hub, "--connect", &param, "--listen", &rogue_listen];
         args.extend(rogue.args.iter().map(String::as_str));
         let c = ns.c.as_deref().expect("rogues need namespace C");
         rogue_procs.push(Proc::start(c, rogue_exe, rogue.name, &args, dir));

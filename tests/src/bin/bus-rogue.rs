@@ -78,7 +78,12 @@ async fn main() -> anyhow::Result<()> {
 
 /// The number of successful replies to one query, waiting at most 300 ms.
 async fn answered(session: &zenoh::Session, key: &str, payload: Option<Vec<u8>>) -> u64 {
-    let mut get = session.get(key).timeout(Duration::from_millis(300));
+    // As the roles ask (node::Bus::query_with): replies count when they arrive, not only once every
+    // peer the query went to has finished.
+    let mut get = session
+        .get(key)
+        .consolidation(zenoh::query::ConsolidationMode::None)
+        .timeout(Duration::from_millis(300));
     if let Some(payload) = payload {
         get = get.payload(payload);
     }
