@@ -137,6 +137,13 @@ pub struct Updater {
     pub lockstep: Option<node::Lockstep>,
 }
 
+/// Whether `step` is one of the periodic checkpoints (every `checkpoint_every_epochs` epochs).
+fn periodic_checkpoint(s: &LearnerSettings, step: u64) -> bool {
+    s.checkpoint_every_epochs > 0
+        && step.is_multiple_of(s.epoch_length_updates)
+        && (step / s.epoch_length_updates).is_multiple_of(s.checkpoint_every_epochs)
+}
+
 /// A hierarchy's frozen levels as the update thread uses them.
 #[derive(Debug, Default)]
 pub struct Frozen {
@@ -236,7 +243,7 @@ impl Updater {
             }
             let epoch_end = step.is_multiple_of(s.epoch_length_updates);
             let epoch = step / s.epoch_length_updates;
-            if epoch_end && s.checkpoint_every_epochs > 0 && epoch.is_multiple_of(s.checkpoint_every_epochs) {
+            if periodic_checkpoint(&s, step) {
                 // Before this update's priorities: deterministic mode's replay server cuts its state
                 // at a checkpoint step once they arrive, so no cut exists without its checkpoint.
                 self.checkpoint(&mut report);
@@ -290,11 +297,13 @@ impl Updater {
         if step > start_step {
             weights_version = self.publish_weights(&mut report)?;
             self.send(Out::Step(LearnerStep { learner_step: step, weights_version, starved: false }));
-            // Deterministic mode resumes only at the schedule's cuts, which the periodic
-            // checkpoints are; one at another step could not be continued exactly.
-            match self.lockstep.filter(|l| !l.is_cut(step)) {
-                None => self.checkpoint(&mut report),
-                Some(_) => tracing::info!(
+            // A periodic checkpoint step was written with its update. Deterministic mode resumes
+            // only at the schedule's cuts, which the periodic checkpoints are; one at another step
+            // could not be continued exactly.
+            match (periodic_checkpoint(&s, step), self.lockstep) {
+                (true, _) => {}
+                (false, None) => self.checkpoint(&mut report),
+                (false, Some(_)) => tracing::info!(
                     step,
                     "deterministic mode: no checkpoint at shutdown (not a checkpoint step)"
                 ),
