@@ -180,7 +180,7 @@ async fn priority_loop(ctx: Arc<Ctx>, sub: Subscriber, mut shutdown: Shutdown) -
         // Rejections are counted and logged inside; nothing else to do with them here.
         let wake = {
             let mut service = ctx.lock();
-            service.accept_priorities(decoded, Instant::now()).is_ok() && service.is_lockstep()
+            service.accept_priorities(decoded, Instant::now()).is_ok() && service.lockstep().is_some()
         };
         if wake {
             // In deterministic mode a held sample may be waiting for exactly this update.

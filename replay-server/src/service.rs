@@ -268,14 +268,9 @@ impl Service {
         decided
     }
 
-    /// Whether the service runs deterministic mode's schedule.
-    pub fn is_lockstep(&self) -> bool {
-        self.lockstep.is_some()
-    }
-
-    /// Deterministic mode's state: the last checkpoint step cut (or restored) and each executor's
-    /// env steps delivered; `None` in normal mode.
-    pub fn lockstep_state(&self) -> Option<&Lockstep> {
+    /// Deterministic mode's state (its last cut, each executor's env steps delivered, whether it
+    /// cuts); `None` in normal mode.
+    pub fn lockstep(&self) -> Option<&Lockstep> {
         self.lockstep.as_ref()
     }
 

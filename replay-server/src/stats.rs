@@ -121,7 +121,7 @@ pub fn build(service: &Service, inputs: &ReportInputs<'_>) -> StatsReport {
         metric(&format!("refused_total.{key}"), *n as f64);
     }
     metric("rejected_total", service.rejects().total() as f64);
-    if let Some(lockstep) = service.lockstep_state() {
+    if let Some(lockstep) = service.lockstep() {
         metric("lockstep.cut", lockstep.last_cut() as f64);
         metric("lockstep.cuts", f64::from(u8::from(lockstep.cuts())));
         for (id, env_steps) in lockstep.progress().iter().enumerate() {
