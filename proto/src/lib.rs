@@ -5,22 +5,23 @@
 //!
 //! Every key lives under `rl/<run_id>/` ([`RunId`], [`topics`]); `<id>` is a decimal `u32`.
 //!
-//! | key under `rl/<run>/`            | message                               | publisher              | subscribers                       |
-//! |----------------------------------|---------------------------------------|------------------------|-----------------------------------|
-//! | `experience/<executor_id>`       | [`ExperienceBatch`]                   | executor               | replay server (`experience/*`)    |
-//! | `replay/sample` (queryable)      | [`SampleRequest`] → [`SampleReply`]   | learner queries        | replay server replies             |
-//! | `replay/priorities`              | [`PriorityUpdate`]                    | learner                | replay server                     |
-//! | `replay/durable`                 | [`DurableMarks`]                      | replay server          | executors (spools)                |
-//! | `params/publish`                 | [`WeightsSnapshot`]                   | learner                | param server                      |
-//! | `params/weights` (+ queryable)   | [`WeightsSnapshot`]                   | param server           | executors                         |
-//! | `params/frozen` (queryable)      | [`FrozenLevels`] (hierarchies only)   | param server replies   | executors query once              |
-//! | `control/learner`                | [`LearnerStep`]                       | learner                | param server                      |
-//! | `control/step`                   | [`GlobalStep`]                        | param server           | executors, monitor                |
-//! | `control/barrier/<executor_id>`  | [`BarrierReport`]                     | executor               | param server, monitor             |
-//! | `eval`                           | [`EvalReport`]                        | learner                | monitor                           |
-//! | `stats/<role>/<id>`              | [`StatsReport`]                       | every process          | monitor (`stats/**`)              |
-//! | `episodes/<executor_id>`         | [`EpisodeReport`]                     | executor               | monitor (`episodes/*`)            |
-//! | `liveliness/<role>/<id>`         | zenoh liveliness token, no payload    | every process          | barrier, monitor                  |
+//! | key under `rl/<run>/`              | message                                               | publisher                                        | subscribers                                                  |
+//! |------------------------------------|-------------------------------------------------------|--------------------------------------------------|--------------------------------------------------------------|
+//! | `experience/<executor_id>`         | [`ExperienceBatch`]                                   | executor                                         | replay server (`experience/*`)                               |
+//! | `replay/sample` (queryable)        | [`SampleRequest`] → [`SampleReply`]                   | learner queries                                  | replay server replies                                        |
+//! | `replay/priorities`                | [`PriorityUpdate`]                                    | learner                                          | replay server                                                |
+//! | `replay/durable`                   | [`DurableMarks`]                                      | replay server                                    | executors (spools)                                           |
+//! | `replay/state` (queryable, `?k=N`) | [`StatsReport`] (state, newest cut, top-k priorities) | learner and executors query (deterministic mode) | replay server replies                                        |
+//! | `params/publish`                   | [`WeightsSnapshot`]                                   | learner                                          | param server                                                 |
+//! | `params/weights` (queryable)       | [`WeightsSnapshot`] (`?version=V`)                    | param server replies                             | executors query on a newer version                           |
+//! | `params/frozen` (queryable)        | [`FrozenLevels`] (hierarchies only)                   | param server replies                             | executors query once                                         |
+//! | `control/learner`                  | [`LearnerStep`]                                       | learner                                          | param server                                                 |
+//! | `control/step`                     | [`GlobalStep`]                                        | param server                                     | executors, learner, monitor                                  |
+//! | `control/barrier/<executor_id>`    | [`BarrierReport`]                                     | executor                                         | param server, monitor                                        |
+//! | `eval`                             | [`EvalReport`]                                        | learner                                          | monitor                                                      |
+//! | `stats/<role>/<id>`                | [`StatsReport`]                                       | every process                                    | monitor (`stats/**`)                                         |
+//! | `episodes/<executor_id>`           | [`EpisodeReport`]                                     | executor                                         | monitor (`episodes/*`)                                       |
+//! | `liveliness/<role>/<id>`           | zenoh liveliness token, no payload                    | every role                                       | param server (barrier), executors (replay server's), monitor |
 //!
 //! # Parts
 //!

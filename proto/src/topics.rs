@@ -128,7 +128,8 @@ pub enum Topic {
     /// `replay/state` (`?k=N`): queryable; the replay server replies with a [`crate::StatsReport`] of
     /// its state and top-k priorities.
     ReplayState,
-    /// `params/weights`: [`crate::WeightsSnapshot`] from the param server, and its latest-value queryable.
+    /// `params/weights`: queryable; the param server replies with a [`crate::WeightsSnapshot`], the
+    /// newest or the `?version=V` asked for.
     ParamsWeights,
     /// `params/publish`: [`crate::WeightsSnapshot`], learner → param server.
     ParamsPublish,
@@ -300,7 +301,7 @@ pub fn replay_durable(run: &RunId) -> String {
     Topic::ReplayDurable.key(run)
 }
 
-/// `rl/<run>/params/weights`: the param server's broadcast and latest-snapshot queryable.
+/// `rl/<run>/params/weights`: the param server's weights queryable (the newest snapshot, or one version).
 pub fn params_weights(run: &RunId) -> String {
     Topic::ParamsWeights.key(run)
 }

@@ -43,7 +43,8 @@ impl Backend {
 /// use agent::{AgentConfig, AnyLearner, Backend, Batch};
 ///
 /// let cfg = AgentConfig { critic_hidden: vec![16], embedding_layers: vec![16, 4], ..AgentConfig::for_task(3, 2) };
-/// // The paper's configuration is fused; twin Q (for example) would fall back to candle.
+/// // Every scalar-critic configuration is fused (twin Q and the learned temperature too); a
+/// // categorical critic would fall back to candle.
 /// let mut learner = AnyLearner::new(cfg, 7, Backend::Auto)?;
 /// assert_eq!(learner.backend(), Backend::Fused);
 /// let batch = Batch {

@@ -1,6 +1,7 @@
 //! [`FusedLearner`]: the same SAC-LSP update as [`Learner::update`](crate::Learner::update),
-//! hand-fused on plain `f32` buffers and the `gemm` crate for speed (~2.8x candle on one core at
-//! the Ant sizes; see `benches/update.rs`).
+//! hand-fused on plain `f32` buffers and the `gemm` crate for speed (2.4-3.4x candle's updates/s on
+//! one core at the Ant sizes, depending on the CPU; see `benches/update.rs` and the recorded runs in
+//! `docs/results/README.md`).
 //!
 //! Candle spends much of an update outside its matrix kernels: bias-gradient reductions, an
 //! allocation per op, unfused elementwise passes, Adam as a dozen tensor ops per array.
