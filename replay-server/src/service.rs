@@ -264,7 +264,7 @@ impl Service {
             return Ok(0);
         }
         let decided = self.insert_checked(batch, now);
-        self.streams.record(executor, stream, seq);
+        self.streams.decide(executor, stream, seq, decided.is_err());
         decided
     }
 
@@ -295,7 +295,7 @@ impl Service {
     /// stages it until its round.
     fn insert_checked(&mut self, batch: ExperienceBatch, now: Instant) -> Result<u64, Rejection> {
         self.check_batch(&batch, now)?;
-        let Some(lockstep) = self.lockstep.as_mut() else { return Ok(self.insert(batch)) };
+        let Some(lockstep) = self.lockstep.as_mut() else { return self.insert(batch) };
         let n = batch.len() as u64;
         match lockstep.stage(batch) {
             Ok(()) => {
@@ -329,16 +329,15 @@ impl Service {
     }
 
     /// Inserts a checked batch; returns the transitions inserted (none for a marker).
-    fn insert(&mut self, batch: ExperienceBatch) -> u64 {
+    fn insert(&mut self, batch: ExperienceBatch) -> Result<u64, Rejection> {
         if batch.is_empty() {
-            return 0;
+            return Ok(0);
         }
         if let Err(e) = insert_experience(&mut self.buffer, &batch, self.limits.initial_priority) {
             // Validation already covers what the buffer checks; this is a second line of defence.
             let detail = e.to_string();
             let rejection = Rejection { input: Input::Experience, reason: "buffer", detail };
-            self.rejected(rejection, Instant::now());
-            return 0;
+            return Err(self.rejected(rejection, Instant::now()));
         }
         let n = batch.len() as u64;
         self.limiter.on_insert(n);
@@ -347,7 +346,7 @@ impl Service {
         if let Some(replica) = &self.replica {
             replica.send(Op::Insert { batch, rule: self.limits.initial_priority });
         }
-        n
+        Ok(n)
     }
 
     /// Decodes and applies a priority-update payload.
@@ -458,7 +457,8 @@ impl Service {
             let _ = self.apply_priorities(update, now);
         }
         for batch in batches {
-            self.insert(batch);
+            // Staged batches were checked; a buffer error is counted inside (a second line of defence).
+            let _ = self.insert(batch);
         }
         let outcome = self.sample(request);
         if let (SampleOutcome::Batch(batch), Some(lockstep)) = (&outcome, self.lockstep.as_mut()) {

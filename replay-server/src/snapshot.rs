@@ -30,12 +30,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::limiter::{LimiterConfig, LimiterCounters};
 use crate::service::ServiceCounters;
-use crate::streams::Streams;
+use crate::streams::{Streams, StreamsV3};
 
 /// First bytes of a server snapshot.
 pub const SERVER_SNAPSHOT_MAGIC: [u8; 8] = *b"RLRSERVE";
 /// Format version of the server part; the buffer part carries `replay::SNAPSHOT_VERSION`.
-pub const SERVER_SNAPSHOT_VERSION: u32 = 3;
+pub const SERVER_SNAPSHOT_VERSION: u32 = 4;
 /// Largest sidecar read back: it holds counters and rejection reasons, a few KiB at most.
 const MAX_SIDECAR_BYTES: u32 = 1 << 26;
 
@@ -63,9 +63,10 @@ pub struct Sidecar {
     pub lockstep: Option<crate::lockstep::Saved>,
 }
 
-/// Version 2's sidecar (before deterministic mode), read and upgraded.
-#[derive(Deserialize)]
-struct SidecarV2 {
+/// Version 3's sidecar (before the streams table told refused batches apart), read and upgraded;
+/// version 2's is version 3's without the trailing `lockstep` (read with a `None` appended).
+#[derive(Serialize, Deserialize)]
+struct SidecarV3 {
     sequence: u64,
     unix_ms: u64,
     counters: ServiceCounters,
@@ -73,13 +74,13 @@ struct SidecarV2 {
     limiter_config: LimiterConfig,
     limiter: LimiterCounters,
     seed: u64,
-    streams: Streams,
+    streams: StreamsV3,
+    lockstep: Option<crate::lockstep::Saved>,
 }
 
-impl From<SidecarV2> for Sidecar {
-    fn from(v2: SidecarV2) -> Self {
-        let SidecarV2 { sequence, unix_ms, counters, rejected, limiter_config, limiter, seed, streams } = v2;
-        Sidecar {
+impl From<SidecarV3> for Sidecar {
+    fn from(v3: SidecarV3) -> Self {
+        let SidecarV3 {
             sequence,
             unix_ms,
             counters,
@@ -88,7 +89,18 @@ impl From<SidecarV2> for Sidecar {
             limiter,
             seed,
             streams,
-            lockstep: None,
+            lockstep,
+        } = v3;
+        Sidecar {
+            sequence,
+            unix_ms,
+            counters,
+            rejected,
+            limiter_config,
+            limiter,
+            seed,
+            streams: streams.into(),
+            lockstep,
         }
     }
 }
@@ -159,7 +171,7 @@ pub fn read_from<R: Read>(
     }
     let word = |at: usize| u32::from_le_bytes([header[at], header[at + 1], header[at + 2], header[at + 3]]);
     let version = word(8);
-    if version != SERVER_SNAPSHOT_VERSION && version != 2 {
+    if !(2..=SERVER_SNAPSHOT_VERSION).contains(&version) {
         return Err(SnapshotFileError::UnsupportedVersion {
             found: version,
             supported: SERVER_SNAPSHOT_VERSION,
@@ -175,8 +187,13 @@ pub fn read_from<R: Read>(
         return Err(SnapshotFileError::Sidecar("checksum mismatch".into()));
     }
     let decoded = match version {
-        2 => bincode::serde::decode_from_slice::<SidecarV2, _>(&encoded, bincode::config::standard())
-            .map(|(v2, used)| (Sidecar::from(v2), used)),
+        2 | 3 => {
+            if version == 2 {
+                encoded.push(0); // lockstep: None
+            }
+            bincode::serde::decode_from_slice::<SidecarV3, _>(&encoded, bincode::config::standard())
+                .map(|(v3, used)| (Sidecar::from(v3), used))
+        }
         _ => bincode::serde::decode_from_slice(&encoded, bincode::config::standard()),
     };
     let (sidecar, used) = decoded.map_err(|e| SnapshotFileError::Sidecar(e.to_string()))?;
@@ -337,20 +354,59 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_version_2_snapshot_is_read_and_a_cut_round_trips() {
-        // Version 2 is version 3 without the trailing `lockstep` (bincode writes None as one 0 byte).
-        let mut v3 = bincode::serde::encode_to_vec(sidecar(), bincode::config::standard()).unwrap();
-        assert_eq!(v3.pop(), Some(0));
+    /// `sidecar` as format `version` (2 or 3) wrote it: without refused batches, and in version 2
+    /// without the trailing `lockstep` (bincode writes None as one 0 byte).
+    fn old_format(sidecar: Sidecar, version: u32) -> Vec<u8> {
+        let Sidecar {
+            sequence,
+            unix_ms,
+            counters,
+            rejected,
+            limiter_config,
+            limiter,
+            seed,
+            streams,
+            lockstep,
+        } = sidecar;
+        let v3 = SidecarV3 {
+            sequence,
+            unix_ms,
+            counters,
+            rejected,
+            limiter_config,
+            limiter,
+            seed,
+            streams: streams.into(),
+            lockstep,
+        };
+        let mut encoded = bincode::serde::encode_to_vec(v3, bincode::config::standard()).unwrap();
+        if version == 2 {
+            assert_eq!(encoded.pop(), Some(0));
+        }
         let mut bytes = Vec::new();
         bytes.extend_from_slice(&SERVER_SNAPSHOT_MAGIC);
-        bytes.extend_from_slice(&2u32.to_le_bytes());
-        bytes.extend_from_slice(&(v3.len() as u32).to_le_bytes());
-        bytes.extend_from_slice(&crc32fast::hash(&v3).to_le_bytes());
-        bytes.extend_from_slice(&v3);
+        bytes.extend_from_slice(&version.to_le_bytes());
+        bytes.extend_from_slice(&(encoded.len() as u32).to_le_bytes());
+        bytes.extend_from_slice(&crc32fast::hash(&encoded).to_le_bytes());
+        bytes.extend_from_slice(&encoded);
         filled().write_snapshot(&mut bytes).unwrap();
-        let (_, side) = read_from(&mut &bytes[..], cfg(), DIMS).unwrap();
-        assert_eq!(side, sidecar());
+        bytes
+    }
+
+    #[test]
+    fn version_2_and_3_snapshots_are_read_and_a_cut_round_trips() {
+        for version in [2, 3] {
+            let (_, side) = read_from(&mut &old_format(sidecar(), version)[..], cfg(), DIMS).unwrap();
+            assert_eq!(side, sidecar(), "version {version}");
+        }
+        // Refused batches are saved since version 4; older files read them as stored.
+        let mut refusing = sidecar();
+        refusing.streams.decide(3, 77, 1, true);
+        let mut bytes = Vec::new();
+        write_to(&mut bytes, &filled(), &refusing).unwrap();
+        assert!(read_from(&mut &bytes[..], cfg(), DIMS).unwrap().1.streams.refused(3, 77, 1));
+        let (_, side) = read_from(&mut &old_format(refusing, 3)[..], cfg(), DIMS).unwrap();
+        assert!(side.streams.seen(3, 77, 1) && !side.streams.refused(3, 77, 1));
         // A deterministic cut travels with the sidecar.
         let saved = crate::lockstep::Saved {
             cut: 500,

@@ -1,5 +1,6 @@
 //! Which batches of each executor stream the server has decided (stored, or refused for a counted
-//! reason), sans-IO: what recognises a re-sent batch, and what a snapshot's durable marks say.
+//! reason), sans-IO: what recognises a re-sent batch, what a snapshot's durable marks say, and which
+//! decided batches were refused (the experience audit's `refused` column, never `stored`).
 //!
 //! Executors send a stream's batches in order and re-send them in order, so a stream is a prefix
 //! (`below`: every batch under it decided) plus the few decided out of order past it (a re-send
@@ -29,6 +30,31 @@ type Key = (u32, u64);
 pub struct Streams {
     streams: BTreeMap<Key, Seen>,
     clock: u64,
+    /// Per stream, the decided batches that were refused, as ranges `start → end` (end excluded):
+    /// refusals are rare, and when a misconfigured executor has every batch refused they are one
+    /// range. Forgotten with their stream.
+    refused: BTreeMap<Key, BTreeMap<u64, u64>>,
+}
+
+/// The table as snapshot format 3 and earlier saved it (before refusals were told apart), read and
+/// upgraded: its refused batches are not known, so they read as stored.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub(crate) struct StreamsV3 {
+    streams: BTreeMap<Key, Seen>,
+    clock: u64,
+}
+
+impl From<StreamsV3> for Streams {
+    fn from(v3: StreamsV3) -> Self {
+        Streams { streams: v3.streams, clock: v3.clock, refused: BTreeMap::new() }
+    }
+}
+
+#[cfg(test)]
+impl From<Streams> for StreamsV3 {
+    fn from(s: Streams) -> Self {
+        StreamsV3 { streams: s.streams, clock: s.clock }
+    }
 }
 
 impl Streams {
@@ -37,13 +63,42 @@ impl Streams {
         self.streams.get(&(executor_id, stream)).is_some_and(|s| seq < s.below || s.ahead.contains(&seq))
     }
 
-    /// Records batch `seq` of (`executor_id`, `stream`) as decided.
+    /// Whether batch `seq` of (`executor_id`, `stream`) was decided by refusing it.
+    pub fn refused(&self, executor_id: u32, stream: u64, seq: u64) -> bool {
+        let Some(ranges) = self.refused.get(&(executor_id, stream)) else { return false };
+        ranges.range(..=seq).next_back().is_some_and(|(_, &end)| seq < end)
+    }
+
+    /// Records batch `seq` of (`executor_id`, `stream`) as decided: stored, or refused if
+    /// `refused` (for the audit; a batch decided already keeps its first decision).
+    pub fn decide(&mut self, executor_id: u32, stream: u64, seq: u64, refused: bool) {
+        if refused && !self.seen(executor_id, stream, seq) {
+            let ranges = self.refused.entry((executor_id, stream)).or_default();
+            // Batches come in order: the one after a refused range extends it.
+            match ranges.range_mut(..=seq).next_back() {
+                Some((_, end)) if *end == seq => *end += 1,
+                _ => {
+                    ranges.insert(seq, seq + 1);
+                }
+            }
+            if let Some(&next_end) = ranges.get(&(seq + 1)) {
+                ranges.remove(&(seq + 1));
+                if let Some((_, end)) = ranges.range_mut(..=seq).next_back() {
+                    *end = next_end;
+                }
+            }
+        }
+        self.record(executor_id, stream, seq);
+    }
+
+    /// Records batch `seq` of (`executor_id`, `stream`) as decided (stored).
     pub fn record(&mut self, executor_id: u32, stream: u64, seq: u64) {
         self.clock += 1;
         if !self.streams.contains_key(&(executor_id, stream)) && self.streams.len() >= MAX_STREAM_MARKS {
             let stalest = self.streams.iter().min_by_key(|(_, s)| s.touched).map(|(k, _)| *k);
             if let Some(key) = stalest {
                 self.streams.remove(&key);
+                self.refused.remove(&key);
             }
         }
         let seen = self.streams.entry((executor_id, stream)).or_default();
@@ -93,6 +148,27 @@ mod tests {
         assert_eq!(s.marks()[0].durable_below, 3, "the gap closed, and the prefix took what was ahead");
         s.record(0, 9, 1);
         assert_eq!(s.marks()[0].durable_below, 3, "a repeat changes nothing");
+    }
+
+    #[test]
+    fn refused_batches_are_decided_and_told_apart_from_stored_ones() {
+        let mut s = Streams::default();
+        s.decide(0, 9, 0, false);
+        for seq in [1, 2, 4, 3] {
+            s.decide(0, 9, seq, true);
+        }
+        s.decide(0, 9, 5, false);
+        s.decide(0, 9, 0, true); // a re-send of a stored batch stays stored
+        assert_eq!(s.marks()[0].durable_below, 6, "refused batches are decided");
+        let refused: Vec<u64> = (0..7).filter(|&q| s.refused(0, 9, q)).collect();
+        assert_eq!(refused, [1, 2, 3, 4]);
+        assert_eq!(s.refused[&(0, 9)], BTreeMap::from([(1, 5)]), "one range");
+        assert!(!s.refused(1, 9, 1) && !s.refused(0, 8, 1));
+        // A stream forgotten takes its refusals along.
+        for stream in 10..10 + MAX_STREAM_MARKS as u64 {
+            s.record(1, stream, 0);
+        }
+        assert!(!s.refused(0, 9, 1) && s.refused.is_empty());
     }
 
     #[test]

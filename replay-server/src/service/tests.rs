@@ -357,3 +357,19 @@ fn unstreamed_batches_are_never_deduplicated() {
     assert_eq!((s.buffer().len(), s.counters().duplicate_batches), (8, 0));
     assert!(s.streams().is_empty());
 }
+
+#[test]
+fn a_refused_streamed_batch_is_decided_as_refused_not_stored() {
+    let mut s = service(&cfg());
+    let now = Instant::now();
+    let too_large = ExperienceBatch { stream: 5, seq: 1, ..batch(10, cfg().max_insert_transitions + 1) };
+    assert_eq!(s.accept_experience(Ok(streamed(0)), now).unwrap(), 4);
+    assert!(s.accept_experience(Ok(too_large.clone()), now).is_err(), "too large: refused");
+    assert_eq!(s.accept_experience(Ok(streamed(2)), now).unwrap(), 4);
+    // Decided, so the spool releases it and a re-send is a duplicate; but refused, not stored.
+    assert_eq!(s.streams().marks()[0].durable_below, 3);
+    assert_eq!(s.accept_experience(Ok(too_large), now).unwrap(), 0);
+    assert!(s.streams().refused(0, 5, 1));
+    assert!(!s.streams().refused(0, 5, 0) && !s.streams().refused(0, 5, 2));
+    assert_eq!(s.buffer().len(), 8);
+}
