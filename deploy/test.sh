@@ -4,5 +4,10 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 ./deploy/setup.sh
-# --no-fail-fast: one failing test binary must not hide how the others fare.
-exec cargo test --workspace --no-fail-fast "$@"
+# The scripts' own tests (table.sh and table.py on made-up records, about a second), then the
+# workspace's. --no-fail-fast, and the scripts' failure reported at the end: one failing test must not
+# hide how the others fare.
+status=0
+python3 deploy/experiments/test_table.py || { echo "test.sh: deploy/experiments/test_table.py failed" >&2; status=1; }
+cargo test --workspace --no-fail-fast "$@" || status=$?
+exit "$status"

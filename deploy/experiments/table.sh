@@ -19,6 +19,12 @@
 # can be built over several sittings), ROWS (default all four), EPISODES (evaluation episodes per row,
 # default 200, the paper's), EXECUTORS (default 8), MAX_MINUTES (a wall-clock cap per row, default
 # none), BUILD=0 (skip `cargo build`). Writes docs/results/<table id>.md.
+#
+# A row whose training fails stops the table (exit 1, naming its log): nothing older is evaluated in
+# its place. A row stopped by MAX_MINUTES before its budget is evaluated at the updates it reached,
+# and the table marks it with them (table.py reads each evaluation's learner_step). A table whose
+# records were committed under docs/results/<table id>/ is rewritten, without training, by
+# `python3 deploy/experiments/table.py <ant-rllab|ant-v5> <table id> <updates> --records docs/results/<table id>`.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/../.."
 
@@ -49,16 +55,35 @@ with_keys() {
         END { if (!done) { print ""; print table; print lines } }' "$1"
 }
 
-# Runs one row into runs/<table id>-<row>/ and prints its final checkpoint's path.
+# Says why row $1 failed (its log is $2) and stops the table.
+row_failed() {
+    echo "table.sh: $1: $3; see $2 (the table stops here)" >&2
+    tail -n 5 "$2" >&2 || true
+    exit 1
+}
+
+# Sets `checkpoint` to the newest file matching glob $2 (row $1's log $3), or stops the table.
+newest_checkpoint() {
+    checkpoint=$(ls $2 2>/dev/null | tail -n 1) || true
+    [[ -n $checkpoint ]] || row_failed "$1" "$3" "no checkpoint $2 after training"
+}
+
+# Runs one row into runs/<table id>-<row>/ and sets `checkpoint` to its final checkpoint's path.
+# Called as a plain command, never in $(...): bash runs a command substitution without `set -e`, and
+# there a failed row went on to print (and the table to evaluate) an older checkpoint.
 run_row() {
-    local row=$1 dir=runs/$table_id-$1 file=deploy/experiments/$task-$1.toml
+    local row=$1 dir=runs/$table_id-$1 file=deploy/experiments/$task-$1.toml status=0
     mkdir -p "$dir"
     case $row in
         sac-lsp | prioritized)
             cp "$file" "$dir/run.toml"
+            # `sac-lsp train` starts afresh: an earlier sitting's checkpoints must not stand in for this
+            # one's (a shorter run would leave the earlier, longer one newest).
+            rm -f "$dir"/checkpoints/epoch-*.safetensors
             "$bin/sac-lsp" train --config "$dir/run.toml" --epochs $((updates / 1000 + 1)) \
-                ${MAX_MINUTES:+--minutes "$MAX_MINUTES"} --out "$dir" >"$dir/train.log" 2>&1
-            ls "$dir"/checkpoints/epoch-*.safetensors | tail -n 1
+                ${MAX_MINUTES:+--minutes "$MAX_MINUTES"} --out "$dir" >"$dir/train.log" 2>&1 || status=$?
+            [[ $status == 0 ]] || row_failed "$row" "$dir/train.log" "sac-lsp train exited with status $status"
+            newest_checkpoint "$row" "$dir/checkpoints/epoch-*.safetensors" "$dir/train.log"
             ;;
         distributed | categorical* | her-*)
             # Checkpoints every fifth of the budget: the newest three (60%, 80%, 100%) stay, and
@@ -66,21 +91,24 @@ run_row() {
             with_keys "$file" learner "max_updates = $updates
 checkpoint_every_epochs = $((updates / 5000))" >"$dir/run.toml"
             RUN_ID=$table_id-$row BUILD=0 MINUTES=${MAX_MINUTES:-} ./deploy/local.sh "$executors" "$dir/run.toml" \
-                >"$dir/local.log" 2>&1
-            ls "$dir"/checkpoints/learner-*.safetensors | tail -n 1
+                >"$dir/local.log" 2>&1 || status=$?
+            [[ $status == 0 ]] || row_failed "$row" "$dir/local.log" "local.sh exited with status $status"
+            # A resumed row (same RUN_ID) continues its own checkpoints, so the newest is this run's.
+            newest_checkpoint "$row" "$dir/checkpoints/learner-*.safetensors" "$dir/local.log"
             ;;
         2l-distributed)
             local low
             low=runs/$table_id-distributed/checkpoints/learner-$(printf %012d $((updates * 3 / 5))).safetensors
-            [[ -f $low ]] || { echo "table.sh: the 2-level row needs $low (run the distributed row first)" >&2; return 1; }
+            [[ -f $low ]] || { echo "table.sh: the 2-level row needs $low (run the distributed row first)" >&2; exit 1; }
             with_keys "$file" learner "max_updates = $((updates * 2 / 5))
 checkpoint_every_epochs = $((updates / 5000))" | with_keys /dev/stdin hierarchy "levels = [\"$low\"]" \
                 >"$dir/run.toml"
             RUN_ID=$table_id-$row BUILD=0 MINUTES=${MAX_MINUTES:-} ./deploy/local.sh "$executors" "$dir/run.toml" \
-                >"$dir/local.log" 2>&1
-            ls "$dir"/checkpoints/learner-*.safetensors | tail -n 1
+                >"$dir/local.log" 2>&1 || status=$?
+            [[ $status == 0 ]] || row_failed "$row" "$dir/local.log" "local.sh exited with status $status"
+            newest_checkpoint "$row" "$dir/checkpoints/learner-*.safetensors" "$dir/local.log"
             ;;
-        *) echo "table.sh: unknown row '$row'" >&2; return 1 ;;
+        *) echo "table.sh: unknown row '$row'" >&2; exit 1 ;;
     esac
 }
 
@@ -97,7 +125,7 @@ for row in $rows; do
     [[ -f $dir/eval.json ]] && { echo "table.sh: $row already evaluated ($dir/eval.json)" >&2; continue; }
     echo "table.sh: $row: training ($(date +%H:%M))" >&2
     t0=$(date +%s)
-    checkpoint=$(run_row "$row")
+    run_row "$row"
     echo $(($(date +%s) - t0)) >"$dir/train_seconds"
     [[ -f $dir/monitor.jsonl ]] && { "$bin/sac-lsp" plot --input "$dir/monitor.jsonl" --out-dir "$dir" >/dev/null || true; }
     echo "table.sh: $row: evaluating $checkpoint on $episodes episodes ($(date +%H:%M))" >&2
