@@ -4,9 +4,9 @@
 use mujoco_rs::prelude::MjtObjBase;
 
 use crate::ant_model::{AntVariant, ant_mjcf};
-use crate::episode::Episode;
-use crate::physics::Physics;
-use crate::{EnvError, EnvSpec, Environment, InitState, RewardTerms, Step, check_action, numpy};
+use crate::episode::{Episode, MujocoTask};
+use crate::physics::{NoiseStream, Physics};
+use crate::{EnvError, EnvSpec, InitState, RewardTerms, Step, check_action, numpy};
 
 /// rllab's `normalize()` maps [-1, 1] onto the motors' ±150 range.
 const ACTION_SCALE: f64 = 150.0;
@@ -55,17 +55,6 @@ impl AntRllab {
         self.episode.physics.data().cfrc_ext().iter().flatten().map(|f| f.clamp(-1.0, 1.0))
     }
 
-    fn observation(&self) -> Vec<f64> {
-        let data = self.episode.physics.data();
-        let mut obs = Vec::with_capacity(self.episode.spec.obs_dim);
-        obs.extend_from_slice(data.qpos());
-        obs.extend_from_slice(data.qvel());
-        obs.extend(self.clipped_contact_forces());
-        obs.extend_from_slice(&data.xmat()[TORSO]);
-        obs.extend_from_slice(&data.subtree_com()[TORSO]);
-        obs
-    }
-
     /// rllab's `get_body_comvel("torso")`: the mass-weighted mean linear velocity of the torso's
     /// subtree (every body but the world), each from `mj_objectVelocity` in world coordinates.
     fn torso_subtree_x_velocity(&self) -> f64 {
@@ -81,29 +70,34 @@ impl AntRllab {
     }
 }
 
-impl Environment for AntRllab {
-    fn spec(&self) -> &EnvSpec {
-        &self.episode.spec
+impl MujocoTask for AntRllab {
+    fn episode(&self) -> &Episode {
+        &self.episode
     }
 
-    fn physics(&self) -> Option<&Physics> {
-        Some(&self.episode.physics)
+    fn episode_mut(&mut self) -> &mut Episode {
+        &mut self.episode
     }
 
-    fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
-        self.episode.noisy_restart(seed, |noise, physics| InitState {
+    fn start_state(noise: &mut NoiseStream, physics: &Physics) -> InitState {
+        InitState {
             qpos: noise.normal_around(&INIT_QPOS, QPOS_NOISE),
             qvel: noise.normal_around(&vec![0.0; physics.nv()], QVEL_NOISE),
-        });
-        self.observation()
+        }
     }
 
-    fn reset_to(&mut self, state: &InitState) -> Result<Vec<f64>, EnvError> {
-        self.episode.restart(state)?;
-        Ok(self.observation())
+    fn observation(&self) -> Vec<f64> {
+        let data = self.episode.physics.data();
+        let mut obs = Vec::with_capacity(self.episode.spec.obs_dim);
+        obs.extend_from_slice(data.qpos());
+        obs.extend_from_slice(data.qvel());
+        obs.extend(self.clipped_contact_forces());
+        obs.extend_from_slice(&data.xmat()[TORSO]);
+        obs.extend_from_slice(&data.subtree_com()[TORSO]);
+        obs
     }
 
-    fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
+    fn advance(&mut self, action: &[f64]) -> Result<Step, EnvError> {
         check_action(&self.episode.spec, action)?;
         // normalize(): lb + (a + 1)(ub - lb)/2, clipped to [lb, ub]; the costs see the clipped action.
         let unit: Vec<f64> = action.iter().map(|a| a.clamp(-1.0, 1.0)).collect();

@@ -1,9 +1,9 @@
 //! Gymnasium Ant-v5, reproduced call for call (`gymnasium/envs/mujoco/ant_v5.py` with its defaults).
 
 use crate::ant_model::{AntVariant, ant_mjcf};
-use crate::episode::Episode;
-use crate::physics::Physics;
-use crate::{EnvError, EnvSpec, Environment, InitState, RewardTerms, Step, check_action, numpy};
+use crate::episode::{Episode, MujocoTask};
+use crate::physics::{NoiseStream, Physics};
+use crate::{EnvError, EnvSpec, InitState, RewardTerms, Step, check_action, numpy};
 
 const FRAME_SKIP: usize = 5;
 const FORWARD_REWARD_WEIGHT: f64 = 1.0;
@@ -61,16 +61,6 @@ impl AntV5 {
         self.episode.physics.data().cfrc_ext().iter().flatten().map(move |f| f.clamp(lo, hi))
     }
 
-    fn observation(&self) -> Vec<f64> {
-        let data = self.episode.physics.data();
-        let mut obs = Vec::with_capacity(self.episode.spec.obs_dim);
-        obs.extend_from_slice(&data.qpos()[self.first_qpos..]);
-        obs.extend_from_slice(data.qvel());
-        // Row 0 is the world body, always zero: Ant-v5 leaves it out of the observation.
-        obs.extend(self.clipped_contact_forces().skip(6));
-        obs
-    }
-
     fn is_healthy(&self) -> bool {
         let z = self.episode.physics.data().qpos()[2];
         self.episode.physics.state_is_finite() && HEALTHY_Z.0 <= z && z <= HEALTHY_Z.1
@@ -84,29 +74,33 @@ impl AntV5 {
     }
 }
 
-impl Environment for AntV5 {
-    fn spec(&self) -> &EnvSpec {
-        &self.episode.spec
+impl MujocoTask for AntV5 {
+    fn episode(&self) -> &Episode {
+        &self.episode
     }
 
-    fn physics(&self) -> Option<&Physics> {
-        Some(&self.episode.physics)
+    fn episode_mut(&mut self) -> &mut Episode {
+        &mut self.episode
     }
 
-    fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
-        self.episode.noisy_restart(seed, |noise, physics| InitState {
+    fn start_state(noise: &mut NoiseStream, physics: &Physics) -> InitState {
+        InitState {
             qpos: noise.uniform_around(&physics.qpos0(), RESET_NOISE_SCALE),
             qvel: noise.normal_around(&vec![0.0; physics.nv()], RESET_NOISE_SCALE),
-        });
-        self.observation()
+        }
     }
 
-    fn reset_to(&mut self, state: &InitState) -> Result<Vec<f64>, EnvError> {
-        self.episode.restart(state)?;
-        Ok(self.observation())
+    fn observation(&self) -> Vec<f64> {
+        let data = self.episode.physics.data();
+        let mut obs = Vec::with_capacity(self.episode.spec.obs_dim);
+        obs.extend_from_slice(&data.qpos()[self.first_qpos..]);
+        obs.extend_from_slice(data.qvel());
+        // Row 0 is the world body, always zero: Ant-v5 leaves it out of the observation.
+        obs.extend(self.clipped_contact_forces().skip(6));
+        obs
     }
 
-    fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
+    fn advance(&mut self, action: &[f64]) -> Result<Step, EnvError> {
         check_action(&self.episode.spec, action)?;
         let xy_before = self.torso_xy();
         self.episode.physics.step(action, FRAME_SKIP);

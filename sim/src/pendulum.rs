@@ -2,9 +2,9 @@
 //! pole must stay within 0.2 rad of upright; +1 per step while it does. Small and fast, for learning
 //! checks (a good agent reaches the maximum return of 1000 within ~20K steps).
 
-use crate::episode::Episode;
-use crate::physics::Physics;
-use crate::{EnvError, EnvSpec, Environment, InitState, RewardTerms, Step, check_action};
+use crate::episode::{Episode, MujocoTask};
+use crate::physics::{NoiseStream, Physics};
+use crate::{EnvError, EnvSpec, InitState, RewardTerms, Step, check_action};
 
 /// The pendulum MJCF.
 pub const INVERTED_PENDULUM_MJCF: &str = include_str!("../assets/inverted_pendulum.xml");
@@ -41,36 +41,30 @@ impl InvertedPendulum {
         };
         Ok(Self { episode: Episode::new(physics, spec, seed) })
     }
+}
+
+impl MujocoTask for InvertedPendulum {
+    fn episode(&self) -> &Episode {
+        &self.episode
+    }
+
+    fn episode_mut(&mut self) -> &mut Episode {
+        &mut self.episode
+    }
+
+    fn start_state(noise: &mut NoiseStream, physics: &Physics) -> InitState {
+        InitState {
+            qpos: noise.uniform_around(&physics.qpos0(), RESET_NOISE_SCALE),
+            qvel: noise.uniform_around(&vec![0.0; physics.nv()], RESET_NOISE_SCALE),
+        }
+    }
 
     fn observation(&self) -> Vec<f64> {
         let data = self.episode.physics.data();
         data.qpos().iter().chain(data.qvel()).copied().collect()
     }
-}
 
-impl Environment for InvertedPendulum {
-    fn spec(&self) -> &EnvSpec {
-        &self.episode.spec
-    }
-
-    fn physics(&self) -> Option<&Physics> {
-        Some(&self.episode.physics)
-    }
-
-    fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
-        self.episode.noisy_restart(seed, |noise, physics| InitState {
-            qpos: noise.uniform_around(&physics.qpos0(), RESET_NOISE_SCALE),
-            qvel: noise.uniform_around(&vec![0.0; physics.nv()], RESET_NOISE_SCALE),
-        });
-        self.observation()
-    }
-
-    fn reset_to(&mut self, state: &InitState) -> Result<Vec<f64>, EnvError> {
-        self.episode.restart(state)?;
-        Ok(self.observation())
-    }
-
-    fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
+    fn advance(&mut self, action: &[f64]) -> Result<Step, EnvError> {
         check_action(&self.episode.spec, action)?;
         self.episode.physics.step(action, FRAME_SKIP);
         let observation = self.observation();
