@@ -12,15 +12,14 @@
 # Copy a role's three files (plus ca.pem) only to the hosts that run that role: holding a key is what
 # makes a process that role.
 #
-# What the access control allows (every role's session enforces it on what it receives, so a forged
-# message is dropped at the first honest peer it reaches):
-#   - only the learner publishes weights to the param server, learner steps, priorities and evaluations,
-#     and only it may query the replay server for samples;
-#   - only executors publish experience, barrier reports and episodes;
-#   - only the param server serves and announces weights and global steps;
-#   - only the replay server answers sample queries and publishes durable marks;
+# What the access control allows (every role's zenoh peer enforces it on what it receives, so a forged
+# message is dropped at the first honest peer it reaches), as proto's topic registry says:
+#   - only the role that writes a topic may publish it or serve its queries (the learner: weights to
+#     the param server, learner steps, priorities, evaluations; executors: experience, barrier reports,
+#     episodes; the param server: global steps, weights and frozen levels; the replay server: samples,
+#     state, cuts, durable marks), and only the learner may query the replay server for samples;
 #   - each role publishes only its own stats and liveliness tokens;
-#   - the monitor (also `sac-lsp eval`/`monitor` from another host) only listens and queries weights;
+#   - the monitor (also `sac-lsp eval`/`monitor` from another host) only listens and queries;
 #   - a peer whose certificate is not signed by ca.pem cannot connect, and one with another common
 #     name is denied everything (default deny).
 # Host names are not what is authenticated (the CA's signature and the role's common name are), so
@@ -65,52 +64,41 @@ EOF
         -days "$days" -sha256 -extfile "$ext" -out "$dir/$role.pem" 2>/dev/null
 done
 
-# Rule helpers: a JSON5 rule denying `messages` on `keys` (both lists already quoted).
-deny() { # id, messages, keys
-    echo "      { id: \"$1\", permission: \"deny\", flows: [\"ingress\"], messages: [$2], key_exprs: [$3] },"
-}
-pub='"put", "delete"'
-serve='"declare_queryable", "reply"'
-rules=$(
-    echo '      { id: "members", permission: "allow", flows: ["ingress", "egress"], messages: ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply", "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"], key_exprs: ["**"] },'
-    deny learner-only "$pub" '"rl/*/params/publish", "rl/*/control/learner", "rl/*/replay/priorities", "rl/*/eval"'
-    deny learner-samples '"query"' '"rl/*/replay/sample"'
-    deny executor-only "$pub" '"rl/*/experience/*", "rl/*/control/barrier/*", "rl/*/episodes/*"'
-    deny param-only "$pub" '"rl/*/params/weights", "rl/*/control/step"'
-    deny param-serves "$serve" '"rl/*/params/weights", "rl/*/params/frozen"'
-    deny replay-only "$pub" '"rl/*/replay/durable"'
-    deny replay-serves "$serve" '"rl/*/replay/sample", "rl/*/replay/state"'
-    deny monitor-listens "$pub, $serve, \"liveliness_token\"" '"**"'
-    for role in learner executor replay param; do
-        deny "own-$role" "$pub, \"liveliness_token\"" "\"rl/*/stats/$role/*\", \"rl/*/liveliness/$role/*\""
-    done
-)
-# Who each deny rule binds: every role but the one it protects.
-others() { # protected roles...
-    local out=() r
-    for r in learner executor replay param monitor; do
-        [[ " $* " == *" $r "* ]] || out+=("\"$r\"")
-    done
-    local IFS=,
-    echo "${out[*]}"
-}
-policy() { # rule, protected roles...
-    local rule=$1
-    shift
-    echo "      { rules: [\"$rule\"], subjects: [$(others "$@")] },"
-}
-policies=$(
-    echo '      { rules: ["members"], subjects: ["learner", "executor", "replay", "param", "monitor"] },'
-    policy learner-only learner
-    policy learner-samples learner
-    policy executor-only executor
-    policy param-only param
-    policy param-serves param
-    policy replay-only replay
-    policy replay-serves replay
-    policy monitor-listens learner executor replay param
-    for role in learner executor replay param; do policy "own-$role" "$role"; done
-)
+# The access control, generated from proto's topic registry (proto/src/registry.rs), which says who
+# publishes or serves each topic; `cargo test -p proto --test registry` fails when this block drifts
+# from it and SACLSP_BLESS=1 rewrites it.
+# topics:begin
+rules='
+      { id: "members", permission: "allow", flows: ["ingress", "egress"], messages: ["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply", "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"], key_exprs: ["**"] },
+      { id: "learner-publishes", permission: "deny", flows: ["ingress"], messages: ["put", "delete"], key_exprs: ["rl/*/replay/priorities", "rl/*/params/publish", "rl/*/control/learner", "rl/*/eval"] },
+      { id: "learner-queries", permission: "deny", flows: ["ingress"], messages: ["query"], key_exprs: ["rl/*/replay/sample"] },
+      { id: "executor-publishes", permission: "deny", flows: ["ingress"], messages: ["put", "delete"], key_exprs: ["rl/*/experience/*", "rl/*/control/barrier/*", "rl/*/episodes/*"] },
+      { id: "replay-publishes", permission: "deny", flows: ["ingress"], messages: ["put", "delete"], key_exprs: ["rl/*/replay/durable"] },
+      { id: "replay-serves", permission: "deny", flows: ["ingress"], messages: ["declare_queryable", "reply"], key_exprs: ["rl/*/replay/sample", "rl/*/replay/state", "rl/*/replay/cut"] },
+      { id: "param-publishes", permission: "deny", flows: ["ingress"], messages: ["put", "delete"], key_exprs: ["rl/*/control/step"] },
+      { id: "param-serves", permission: "deny", flows: ["ingress"], messages: ["declare_queryable", "reply"], key_exprs: ["rl/*/params/weights", "rl/*/params/frozen"] },
+      { id: "monitor-listens", permission: "deny", flows: ["ingress"], messages: ["put", "delete", "declare_queryable", "reply", "liveliness_token"], key_exprs: ["**"] },
+      { id: "own-learner", permission: "deny", flows: ["ingress"], messages: ["put", "delete", "liveliness_token"], key_exprs: ["rl/*/stats/learner/*", "rl/*/liveliness/learner/*"] },
+      { id: "own-executor", permission: "deny", flows: ["ingress"], messages: ["put", "delete", "liveliness_token"], key_exprs: ["rl/*/stats/executor/*", "rl/*/liveliness/executor/*"] },
+      { id: "own-replay", permission: "deny", flows: ["ingress"], messages: ["put", "delete", "liveliness_token"], key_exprs: ["rl/*/stats/replay/*", "rl/*/liveliness/replay/*"] },
+      { id: "own-param", permission: "deny", flows: ["ingress"], messages: ["put", "delete", "liveliness_token"], key_exprs: ["rl/*/stats/param/*", "rl/*/liveliness/param/*"] },
+'
+policies='
+      { rules: ["members"], subjects: ["learner", "executor", "replay", "param", "monitor"] },
+      { rules: ["learner-publishes"], subjects: ["executor", "replay", "param", "monitor"] },
+      { rules: ["learner-queries"], subjects: ["executor", "replay", "param", "monitor"] },
+      { rules: ["executor-publishes"], subjects: ["learner", "replay", "param", "monitor"] },
+      { rules: ["replay-publishes"], subjects: ["learner", "executor", "param", "monitor"] },
+      { rules: ["replay-serves"], subjects: ["learner", "executor", "param", "monitor"] },
+      { rules: ["param-publishes"], subjects: ["learner", "executor", "replay", "monitor"] },
+      { rules: ["param-serves"], subjects: ["learner", "executor", "replay", "monitor"] },
+      { rules: ["monitor-listens"], subjects: ["monitor"] },
+      { rules: ["own-learner"], subjects: ["executor", "replay", "param", "monitor"] },
+      { rules: ["own-executor"], subjects: ["learner", "replay", "param", "monitor"] },
+      { rules: ["own-replay"], subjects: ["learner", "executor", "param", "monitor"] },
+      { rules: ["own-param"], subjects: ["learner", "executor", "replay", "monitor"] },
+'
+# topics:end
 subjects=$(for role in "${roles[@]}"; do echo "      { id: \"$role\", cert_common_names: [\"$role\"] },"; done)
 
 for role in "${roles[@]}"; do

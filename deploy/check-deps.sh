@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# The architecture's dependency rules, checked on the real dependency graph: proto is a leaf, the
-# sans-IO cores stay off the bus, and the roles never depend on each other (they talk through proto).
+# The architecture's dependency rules, checked on the real dependency graph: proto and run are leaves,
+# the sans-IO cores stay off the bus, the roles never depend on each other (they talk through proto),
+# and the replay and param servers, which never simulate, do not link MuJoCo (run gives them the widths).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
@@ -17,7 +18,10 @@ forbid() { # crate, forbidden dependency...
     done
 }
 roles=(replay-server param-server learner executor)
-forbid proto zenoh tokio candle-core mujoco-rs sim agent node replay "${roles[@]}"
+forbid proto zenoh tokio candle-core mujoco-rs sim agent node replay run "${roles[@]}"
+forbid run zenoh tokio candle-core mujoco-rs proto sim agent node replay "${roles[@]}"
+forbid replay-server sim mujoco-rs
+forbid param-server sim mujoco-rs
 forbid sim zenoh tokio candle-core proto agent node replay "${roles[@]}"
 forbid agent zenoh tokio mujoco-rs proto sim node replay "${roles[@]}"
 forbid replay zenoh tokio candle-core mujoco-rs sim agent node "${roles[@]}"

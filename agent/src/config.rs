@@ -210,6 +210,22 @@ impl AgentConfig {
         if level == 0 { Self::default() } else { Self::default().level_above() }
     }
 
+    /// The networks of a run: its `[agent]` table over the defaults of the trained level (the
+    /// level-above ones on top of frozen levels), sized to the run's widths (with HER, the goal is
+    /// part of the observation). Not yet validated ([`Self::validate_for_run`]); the error names
+    /// the table.
+    pub fn from_run(spec: &run::RunSpec) -> std::result::Result<Self, String> {
+        let base = Self::default_at_level(spec.hierarchy.depth());
+        let dims = spec.dims();
+        Ok(Self { obs_dim: dims.obs_dim, act_dim: dims.act_dim, ..spec.table_over("agent", &base)? })
+    }
+
+    /// Checks every field, and `[her]` against it (HER needs n_step = 1); the error names the table.
+    pub fn validate_for_run(&self, spec: &run::RunSpec) -> std::result::Result<(), String> {
+        spec.her.validate(spec.task, self.n_step)?;
+        self.validate().map_err(|e| format!("[agent] {e}"))
+    }
+
     /// The discount of the Q target's bootstrap V̄(s'): discount^n_step, since a stored transition
     /// spans n_step env steps.
     pub fn bootstrap_discount(&self) -> f32 {

@@ -88,17 +88,10 @@ impl Temperature {
     }
 }
 
-fn splitmix64(mut x: u64) -> u64 {
-    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^ (x >> 31)
-}
-
 /// Fills `out` (row-major `[rows, act_dim]`) with the latents z ~ N(0, I) of update `step` of a
 /// learner seeded with `seed`; shared with the fused learner so both draw the same noise.
 pub(crate) fn fill_latent_noise(seed: u64, step: u64, out: &mut [f32]) {
-    let mut rng = StdRng::seed_from_u64(splitmix64(seed ^ splitmix64(step)));
+    let mut rng = StdRng::seed_from_u64(run::splitmix64(seed ^ run::splitmix64(step)));
     for z in out {
         *z = rng.sample(StandardNormal);
     }

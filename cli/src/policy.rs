@@ -7,10 +7,8 @@ use std::path::{Path, PathBuf};
 use agent::{Actor, AgentConfig, ParamSnapshot, PolicyStack, Schema};
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
-use node::{HierarchyKeys, RunKeys};
 use proto::EvalMode;
-use sim::Task;
-use sim::her::HerConfig;
+use run::{HerConfig, RunSpec, Task};
 
 /// Which policy to run, on what, and how.
 #[derive(Debug, Args)]
@@ -98,12 +96,12 @@ impl PolicyArgs {
         let run_file = self.config.as_deref().map(read_run_file).transpose()?;
         let task = match (self.task, &run_file) {
             (Some(task), _) => task,
-            (None, Some(run)) => run.keys.task.parse().with_context(|| "[train] task of the run file")?,
+            (None, Some(run)) => run.spec.task,
             (None, None) => Task::AntV5,
         };
         let policy = read_policy(&self.checkpoint, run_file.as_ref())?;
         // With HER the policy sees observation ++ goal: episodes step the run's goal-conditioned task.
-        let her = run_file.as_ref().map(|r| r.her.clone()).unwrap_or_default();
+        let her = run_file.as_ref().map(|r| r.spec.her.clone()).unwrap_or_default();
         // (Evaluation draws no n-step returns: 1 checks the goal against the task alone.)
         her.validate(task, 1).map_err(anyhow::Error::msg)?;
         let spec = her.dims(task);
@@ -123,34 +121,17 @@ impl PolicyArgs {
 
 /// What a run file says about the policy.
 pub struct RunFile {
-    /// The `[train]` keys.
-    pub keys: RunKeys,
-    /// `[agent]`.
+    /// The run's shared tables (`[train] task`, `[hierarchy]`, `[her]`).
+    pub spec: RunSpec,
+    /// `[agent]`, over the defaults of the run's trained level.
     pub agent: AgentConfig,
-    /// `[hierarchy]`.
-    pub hierarchy: HierarchyKeys,
-    /// `[her]`.
-    pub her: HerConfig,
 }
 
-/// The `[train]` keys, `[hierarchy]` and `[agent]` tables of a run file.
+/// The shared tables and `[agent]` of a run file.
 pub fn read_run_file(path: &Path) -> Result<RunFile> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let parse = |section: &str| format!("{}: [{section}]", path.display());
-    let keys: RunKeys = node::config::parse_section(&text, "train")
-        .map_err(anyhow::Error::msg)
-        .with_context(|| parse("train"))?;
-    let hierarchy: HierarchyKeys = node::config::parse_section(&text, "hierarchy")
-        .map_err(anyhow::Error::msg)
-        .with_context(|| parse("hierarchy"))?;
-    let base = AgentConfig::default_at_level(hierarchy.depth());
-    let agent: AgentConfig = node::config::parse_section_over(&text, "agent", &base)
-        .map_err(anyhow::Error::msg)
-        .with_context(|| parse("agent"))?;
-    let her: HerConfig = node::config::parse_section(&text, "her")
-        .map_err(anyhow::Error::msg)
-        .with_context(|| parse("her"))?;
-    Ok(RunFile { keys, agent, hierarchy, her })
+    let spec = RunSpec::load(Some(path))?;
+    let agent = AgentConfig::from_run(&spec).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    Ok(RunFile { spec, agent })
 }
 
 /// Reads the weights, the networks they fit, and the frozen levels below them.
@@ -164,11 +145,11 @@ pub fn read_policy(path: &Path, run_file: Option<&RunFile>) -> Result<Policy> {
     let embedded = PolicyStack::from_embedded(&tensors).map_err(in_file)?;
     let frozen: Vec<Vec<u8>> = match run_file {
         _ if !embedded.is_empty() => embedded.weights().into_iter().map(<[u8]>::to_vec).collect(),
-        Some(run) => run.hierarchy.read().map_err(anyhow::Error::msg)?,
+        Some(run) => run.spec.hierarchy.read().map_err(anyhow::Error::msg)?,
         None => Vec::new(),
     };
     let base = match run_file {
-        Some(run) if run.hierarchy.depth() == frozen.len() => run.agent.clone(),
+        Some(run) if run.spec.hierarchy.depth() == frozen.len() => run.agent.clone(),
         _ => AgentConfig::default_at_level(frozen.len()),
     };
     let schema: Schema = tensors.iter().map(|(name, t)| (name.clone(), t.dims().to_vec())).collect();

@@ -77,7 +77,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let format = Format::of(&args.out)?;
     let Loaded { task, her, policy } = args.policy.load()?;
     let seed = args.policy.seed;
-    let mut env = her.make(task, seed)?;
+    let mut env = sim::her::make(&her, task, seed)?;
     let physics = env.physics().ok_or_else(|| anyhow!("{task} has no simulation to draw"))?;
     let view = View {
         width: args.width,

@@ -54,7 +54,7 @@ pub enum ActionPrecision {
 
 /// Runs the rollout.
 pub fn run(args: &RolloutArgs) -> Result<()> {
-    let mut env = args.task.make(args.seed.unwrap_or(0))?;
+    let mut env = sim::make(args.task, args.seed.unwrap_or(0))?;
     let spec = env.spec().clone();
     let mut actions = csv::read_rows(&args.actions)?;
     if let Some(row) = actions.iter().position(|row| row.len() != spec.act_dim) {

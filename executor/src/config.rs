@@ -1,10 +1,9 @@
 //! The executor's configuration: its `[executor]` table, plus the run's `[agent]` table (the same
-//! networks the learner trains) and the task and seed from `[train]`.
+//! networks the learner trains) and the run's shared tables ([`RunSpec`]).
 
 use agent::AgentConfig;
-use node::RunKeys;
+use run::RunSpec;
 use serde::Deserialize;
-use sim::Task;
 
 /// The `[executor]` table.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -42,10 +41,6 @@ pub struct ExecutorSettings {
     pub spool_max_bytes: u64,
 }
 
-/// `SACLSP_SPOOL_DIR`: overrides `[executor] spool_dir`, so a launcher can put each run's spools in
-/// its folder without editing the shared run file.
-pub const SPOOL_DIR_ENV: &str = "SACLSP_SPOOL_DIR";
-
 impl Default for ExecutorSettings {
     fn default() -> Self {
         Self {
@@ -62,40 +57,20 @@ impl Default for ExecutorSettings {
 }
 
 /// Everything an executor reads from the run file.
-#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
-#[serde(default)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct ExecutorConfig {
     /// `[executor]`.
     pub executor: ExecutorSettings,
-    /// `[agent]`: the policy and critics (dimensions are set from the task).
+    /// `[agent]`: the policy and critics, sized to the run's widths.
     pub agent: AgentConfig,
-    /// `[train]`: task and seed.
-    pub train: RunKeys,
-    /// `[hierarchy]`: only how many frozen levels there are; the levels themselves come over the
-    /// bus from the param server, so this host needs none of their files.
-    pub hierarchy: node::HierarchyKeys,
-    /// `[her]`: goals appended to the observation, goal rewards, relabelled episodes.
-    pub her: sim::her::HerConfig,
-    /// Deterministic mode's schedule (`[train] deterministic`, `[lockstep]`); `None` otherwise.
-    #[serde(skip)]
-    pub lockstep: Option<node::Lockstep>,
+    /// The run's shared tables: task, seed, `[her]` (goals appended to the observation, goal
+    /// rewards, relabelled episodes), `[hierarchy]` (only how many frozen levels there are: the
+    /// levels themselves come over the bus from the param server, so this host needs none of their
+    /// files) and deterministic mode's schedule.
+    pub run: RunSpec,
 }
 
-impl ExecutorConfig {
-    /// The task, checked.
-    pub fn task(&self) -> Result<Task, String> {
-        self.train.task.parse::<Task>().map_err(|e| format!("[train] task: {e}"))
-    }
-
-    /// Sets the agent's dimensions from the task (with HER, the goal is part of the observation).
-    pub fn fitted(mut self) -> Result<Self, String> {
-        let dims = self.her.dims(self.task()?);
-        (self.agent.obs_dim, self.agent.act_dim) = (dims.obs_dim, dims.act_dim);
-        Ok(self)
-    }
-}
-
-impl node::RoleConfig for ExecutorConfig {
+impl run::RoleConfig for ExecutorConfig {
     const SECTION: &'static str = "executor";
 
     fn validate(&self) -> Result<(), String> {
@@ -108,33 +83,28 @@ impl node::RoleConfig for ExecutorConfig {
             ("stats_interval_ms", s.stats_interval_ms),
             ("spool_max_bytes", s.spool_max_bytes),
         ];
-        if let Some(key) = node::config::first_zero(&positive) {
+        if let Some(key) = run::table::first_zero(&positive) {
             return Err(format!("[executor] {key} must be > 0"));
         }
         if s.batch_transitions as usize > proto::MAX_BATCH_LEN {
             return Err(format!("[executor] batch_transitions must be at most {}", proto::MAX_BATCH_LEN));
         }
-        self.her.validate(self.task()?, self.agent.n_step)?;
-        self.agent.validate().map_err(|e| format!("[agent] {e}"))
+        self.agent.validate_for_run(&self.run)
     }
 
-    fn parse(text: &str) -> Result<Self, String> {
-        let mut config: ExecutorConfig = toml::from_str(text).map_err(|e| e.to_string())?;
-        // On top of frozen levels, [agent] keys override the level-above settings instead.
-        let base = AgentConfig::default_at_level(config.hierarchy.depth());
-        config.agent =
-            node::config::parse_section_over(text, "agent", &base).map_err(|e| format!("[agent] {e}"))?;
-        if let Some(dir) = std::env::var_os(SPOOL_DIR_ENV) {
-            config.executor.spool_dir = Some(dir.into());
+    /// `[executor]` with `SACLSP_SPOOL_DIR` over its `spool_dir`, and `[agent]` for the run.
+    fn from_spec(spec: &RunSpec) -> Result<Self, String> {
+        let mut executor: ExecutorSettings = spec.table(Self::SECTION)?;
+        if let Some(dir) = &spec.overrides.spool_dir {
+            executor.spool_dir = Some(dir.clone());
         }
-        config.lockstep = node::Lockstep::from_run_file(text)?;
-        config.fitted()
+        Ok(Self { executor, agent: AgentConfig::from_run(spec)?, run: spec.clone() })
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use node::RoleConfig;
+    use run::RoleConfig;
 
     use super::*;
 
@@ -145,7 +115,7 @@ mod tests {
         let c = ExecutorConfig::parse(text).unwrap();
         assert_eq!((c.agent.obs_dim, c.agent.act_dim), (4, 1));
         assert_eq!(c.executor.batch_transitions, 8);
-        assert_eq!(c.train.seed, 4);
+        assert_eq!(c.run.seed(), 4);
         assert_eq!(c.validate(), Ok(()));
         assert!(
             ExecutorConfig::parse("[executor]\nbatch_transitons = 8\n")

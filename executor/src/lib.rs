@@ -77,14 +77,14 @@ pub struct Report {
 
 /// Seeds of executor `id` in a run seeded `seed`: distinct streams per executor (splitmix64).
 pub fn executor_seed(seed: u64, id: u32) -> u64 {
-    node::config::mix_seed(seed, id)
+    run::mix_seed(seed, id)
 }
 
 /// Runs the executor until `shutdown` fires.
 pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> anyhow::Result<Report> {
     let started = std::time::Instant::now();
     let id = bus.node().id;
-    if let Some(schedule) = config.lockstep
+    if let Some(schedule) = config.run.lockstep
         && id >= schedule.executors
     {
         anyhow::bail!(
@@ -92,13 +92,13 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
             schedule.executors
         );
     }
-    let seed = executor_seed(config.train.seed, id);
-    let task = config.task().map_err(anyhow::Error::msg)?;
-    let env = config.her.make(task, seed)?;
-    let hindsight = config.her.hindsight(task, seed.wrapping_add(2));
+    let seed = executor_seed(config.run.seed(), id);
+    let (her, task) = (&config.run.her, config.run.task);
+    let env = sim::her::make(her, task, seed)?;
+    let hindsight = sim::her::hindsight(her, task, seed.wrapping_add(2));
     let rejects = Arc::new(Mutex::new(Rejects::default()));
     let ms = Duration::from_millis;
-    let (stack, stack_hash) = match config.hierarchy.depth() {
+    let (stack, stack_hash) = match config.run.hierarchy.depth() {
         0 => (PolicyStack::empty(), None),
         depth => {
             let (timeout, deadline) =
@@ -123,10 +123,10 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
     let mut rollout = Rollout::new(id, env, actor, seed)
         .with_episode_limit(config.executor.max_episode_steps)
         .with_hindsight(hindsight)
-        .with_stream(if spool.is_some() { new_stream() } else { 0 });
-    if let Some(schedule) = config.lockstep {
+        .with_stream(stream);
+    if let Some(schedule) = config.run.lockstep {
         // Deterministic mode: start where the replay server's newest cut says the run is.
-        let Some(cut) = node::Cut::ask(&bus, shutdown.clone()).await? else {
+        let Some(cut) = node::ask_cut(&bus, shutdown.clone()).await? else {
             bus.close().await?;
             return Ok(Report::default());
         };
@@ -147,7 +147,7 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
                 "deterministic mode: resuming at the cut"
             );
             rollout = rollout.with_env_steps(start);
-            rollout.restart_streams(node::Lockstep::cut_seed(config.train.seed, id, cut.learner_step));
+            rollout.restart_streams(run::Lockstep::cut_seed(config.run.seed(), id, cut.learner_step));
         }
     }
 
@@ -159,14 +159,14 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
     // so what earlier runs of this executor left in the spool is sent at once.
     let replay_sub = bus.watch(proto::Role::Replay).await?;
     let _alive = bus.announce().await?;
-    tracing::info!(seed, task = %config.train.task, spool = spool.is_some(), "executor up");
+    tracing::info!(seed, task = %config.run.task, spool = spool.is_some(), "executor up");
 
     let inbox = Arc::new(Inbox::default());
     let (out_tx, mut out_rx) = mpsc::channel(64);
     let (wanted_tx, wanted_rx) = watch::channel(None);
-    let lockstep = config.lockstep.map(|schedule| worker::Lockstep {
+    let lockstep = config.run.lockstep.map(|schedule| worker::Lockstep {
         schedule,
-        seed: config.train.seed,
+        seed: config.run.seed(),
         wanted: wanted_tx,
         staged: None,
     });

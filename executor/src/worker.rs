@@ -188,7 +188,7 @@ struct Worker {
 /// Deterministic mode's part of the rollout thread.
 pub struct Lockstep {
     /// The schedule.
-    pub schedule: node::Lockstep,
+    pub schedule: run::Lockstep,
     /// The run's seed, for the streams' restart at each cut.
     pub seed: u64,
     /// The version the next step needs, for the fetch task.
@@ -328,7 +328,7 @@ impl Worker {
 
     /// Deterministic mode's [`Worker::check`]: the allowance is the schedule's, and each step acts
     /// with exactly the version the schedule names (asked of the fetch task in advance).
-    fn check_lockstep(&mut self, schedule: node::Lockstep) -> Option<Wait> {
+    fn check_lockstep(&mut self, schedule: run::Lockstep) -> Option<Wait> {
         let Some(step) = self.step else { return Some(Wait::NoGlobalStep) };
         self.joined_at.get_or_insert(0);
         self.allowed = schedule.allowance(step.learner_step);
@@ -411,7 +411,7 @@ impl Worker {
                 }
             }
             if let Some(at) = cut {
-                self.rollout.restart_streams(node::Lockstep::cut_seed(seed, self.id, at));
+                self.rollout.restart_streams(run::Lockstep::cut_seed(seed, self.id, at));
             }
         }
         Ok(())
@@ -511,7 +511,11 @@ mod tests {
     }
 
     fn start() -> Running {
-        let env = Task::InvertedPendulum.make(1).unwrap();
+        start_marking(None)
+    }
+
+    fn start_marking(made: Option<MadeMark>) -> Running {
+        let env = sim::make(Task::InvertedPendulum, 1).unwrap();
         let cfg = AgentConfig {
             critic_hidden: vec![8],
             embedding_layers: vec![8, 2],

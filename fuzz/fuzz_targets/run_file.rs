@@ -3,7 +3,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use node::RoleConfig;
+use run::RoleConfig;
 
 fn check<C: RoleConfig>(text: &str) {
     if let Ok(config) = C::parse(text) {

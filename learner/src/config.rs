@@ -1,16 +1,12 @@
 //! The learner's configuration: its `[learner]` table, plus the run's `[agent]` table (the networks
-//! executors act with) and the task and seed from `[train]`.
+//! executors act with) and the run's shared tables ([`RunSpec`]).
 
 use std::path::PathBuf;
 
 use agent::{AgentConfig, Backend};
-use node::RunKeys;
 use proto::EvalMode;
+use run::RunSpec;
 use serde::Deserialize;
-use sim::Task;
-
-/// Environment variable overriding `[learner] checkpoint_dir`.
-pub const CHECKPOINT_DIR_ENV: &str = "SACLSP_CHECKPOINT_DIR";
 
 /// The `[learner]` table.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -80,26 +76,19 @@ impl Default for LearnerSettings {
 }
 
 /// Everything the learner reads from the run file.
-#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
-#[serde(default)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct LearnerConfig {
     /// `[learner]`.
     pub learner: LearnerSettings,
-    /// `[agent]`: the networks and the update (dimensions are set from the task).
+    /// `[agent]`: the networks and the update, sized to the run's widths.
     pub agent: AgentConfig,
-    /// `[train]`: task and seed.
-    pub train: RunKeys,
     /// `[replay_server]`: the keys the learner must agree with.
     pub replay_server: ReplayDeadline,
-    /// `[hierarchy]`: frozen levels below the trained one (their files are read here).
-    pub hierarchy: node::HierarchyKeys,
-    /// `[her]`: with goals, the networks' input is observation ++ goal and evaluations step the
-    /// goal-conditioned task (relabelling happens in the executors).
-    pub her: sim::her::HerConfig,
-    /// Deterministic mode's schedule (`[train] deterministic`, `[lockstep]`; `None` otherwise): one
-    /// sample request in flight, each for an exact learner step.
-    #[serde(skip)]
-    pub lockstep: Option<node::Lockstep>,
+    /// The run's shared tables: task, seed, `[hierarchy]` (frozen levels below the trained one,
+    /// whose files are read here), `[her]` (with goals, the networks' input is observation ++ goal
+    /// and evaluations step the goal-conditioned task; relabelling happens in the executors) and
+    /// deterministic mode's schedule (one sample request in flight, each for an exact learner step).
+    pub run: RunSpec,
 }
 
 /// The replay server's request deadline, read from the shared run file to check the learner's
@@ -111,21 +100,7 @@ pub struct ReplayDeadline {
     pub request_deadline_ms: Option<u64>,
 }
 
-impl LearnerConfig {
-    /// The task, checked.
-    pub fn task(&self) -> Result<Task, String> {
-        self.train.task.parse::<Task>().map_err(|e| format!("[train] task: {e}"))
-    }
-
-    /// Sets the agent's dimensions from the task (with HER, the goal is part of the observation).
-    pub fn fitted(mut self) -> Result<Self, String> {
-        let dims = self.her.dims(self.task()?);
-        (self.agent.obs_dim, self.agent.act_dim) = (dims.obs_dim, dims.act_dim);
-        Ok(self)
-    }
-}
-
-impl node::RoleConfig for LearnerConfig {
+impl run::RoleConfig for LearnerConfig {
     const SECTION: &'static str = "learner";
 
     fn validate(&self) -> Result<(), String> {
@@ -140,7 +115,7 @@ impl node::RoleConfig for LearnerConfig {
             ("eval_every_epochs", s.eval_every_epochs),
             ("stats_interval_ms", s.stats_interval_ms),
         ];
-        if let Some(key) = node::config::first_zero(&positive) {
+        if let Some(key) = run::table::first_zero(&positive) {
             return Err(format!("[learner] {key} must be > 0"));
         }
         let deadline = self.replay_server.request_deadline_ms.unwrap_or(proto::DEFAULT_REQUEST_DEADLINE_MS);
@@ -161,7 +136,7 @@ impl node::RoleConfig for LearnerConfig {
                 proto::MAX_BATCH_LEN
             ));
         }
-        if let Some(lockstep) = &self.lockstep {
+        if let Some(lockstep) = &self.run.lockstep {
             if s.publish_weights_every_updates != lockstep.updates_per_round {
                 return Err(format!(
                     "deterministic mode publishes the weights once per round: [learner] \
@@ -182,29 +157,29 @@ impl node::RoleConfig for LearnerConfig {
                     .into());
             }
         }
-        self.her.validate(self.task()?, self.agent.n_step)?;
-        self.agent.validate().map_err(|e| format!("[agent] {e}"))
+        self.agent.validate_for_run(&self.run)
     }
 
-    /// The run file's tables; `SACLSP_CHECKPOINT_DIR`, when set, overrides `checkpoint_dir` (so a
-    /// launcher can put checkpoints in the run's folder without editing the shared run file).
-    fn parse(text: &str) -> Result<Self, String> {
-        let mut config: LearnerConfig = toml::from_str(text).map_err(|e| e.to_string())?;
-        // On top of frozen levels, [agent] keys override the level-above settings instead.
-        let base = AgentConfig::default_at_level(config.hierarchy.depth());
-        config.agent =
-            node::config::parse_section_over(text, "agent", &base).map_err(|e| format!("[agent] {e}"))?;
-        if let Some(dir) = std::env::var_os(CHECKPOINT_DIR_ENV) {
-            config.learner.checkpoint_dir = Some(PathBuf::from(dir));
+    /// `[learner]` with `SACLSP_CHECKPOINT_DIR` over its `checkpoint_dir` (so a launcher can put
+    /// checkpoints in the run's folder without editing the shared run file), `[agent]` for the run,
+    /// and the replay server's deadline.
+    fn from_spec(spec: &RunSpec) -> Result<Self, String> {
+        let mut learner: LearnerSettings = spec.table(Self::SECTION)?;
+        if let Some(dir) = &spec.overrides.checkpoint_dir {
+            learner.checkpoint_dir = Some(dir.clone());
         }
-        config.lockstep = node::Lockstep::from_run_file(text)?;
-        config.fitted()
+        Ok(Self {
+            learner,
+            agent: AgentConfig::from_run(spec)?,
+            replay_server: spec.table("replay_server")?,
+            run: spec.clone(),
+        })
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use node::RoleConfig;
+    use run::RoleConfig;
 
     use super::*;
 

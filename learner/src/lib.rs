@@ -77,15 +77,15 @@ pub struct Report {
 pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> anyhow::Result<Report> {
     let started = Instant::now();
     let s = config.learner.clone();
-    let seed = config.train.seed;
+    let seed = config.run.seed();
     let checkpoints = s.checkpoint_dir.as_ref().map(CheckpointDir::new);
-    let levels = config.hierarchy.read().map_err(anyhow::Error::msg)?;
+    let levels = config.run.hierarchy.read().map_err(anyhow::Error::msg)?;
     let frozen = Frozen::new(PolicyStack::from_weights(&levels)?)?;
     frozen.stack.check_fits(&config.agent).map_err(|e| anyhow::anyhow!("[hierarchy]: {e}"))?;
     if let Some(hash) = frozen.hash {
         tracing::info!(levels = levels.len(), content_hash = %hash, "training on top of frozen levels");
     }
-    let resume_from = match config.lockstep {
+    let resume_from = match config.run.lockstep {
         Some(_) => match deterministic_resume(&bus, checkpoints.as_ref(), shutdown.clone()).await? {
             Some(checkpoint) => checkpoint,
             None => {
@@ -116,7 +116,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     let (out_tx, mut out_rx) = mpsc::channel(256);
     let eval = if s.eval_episodes > 0 {
         let (tx, rx) = std::sync::mpsc::sync_channel::<(u64, ParamSnapshot)>(1);
-        let env = config.her.make(config.task().map_err(anyhow::Error::msg)?, seed.wrapping_add(3))?;
+        let env = sim::her::make(&config.run.her, config.run.task, seed.wrapping_add(3))?;
         let actor = Actor::with_stack(
             config.agent.clone(),
             PolicyStack::from_weights(&levels)?,
@@ -133,7 +133,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
     // Deterministic mode: one request in flight, for an exact step; its batches fit the channel, so
     // the next request goes out while they are used (the replay server holds it until the
     // priorities it must see have arrived).
-    let (request_loops, channel) = match config.lockstep {
+    let (request_loops, channel) = match config.run.lockstep {
         Some(_) => (1, s.batches_per_request as usize),
         None => (s.prefetch_batches, s.prefetch_batches as usize),
     };
@@ -146,7 +146,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
         checkpoints,
         step: step.clone(),
         frozen,
-        lockstep: config.lockstep,
+        lockstep: config.run.lockstep,
     };
     let update_thread =
         std::thread::Builder::new().name("update".into()).spawn(move || updater.run(batch_rx))?;
@@ -161,6 +161,7 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
         timeout: Duration::from_millis(s.sample_timeout_ms),
         prioritized: s.send_priorities,
         exact_step: config
+            .run
             .lockstep
             .map(|_| Arc::new(AtomicU64::new(step.load(std::sync::atomic::Ordering::Relaxed)))),
     };
@@ -233,11 +234,11 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
         outbox.send(message, &fetcher).await;
     }
     let last = updater.final_step;
-    if let Some(schedule) = config.lockstep.filter(|l| l.is_cut(last) && last > updater.start_step) {
+    if let Some(schedule) = config.run.lockstep.filter(|l| l.is_cut(last) && last > updater.start_step) {
         // The replay server cuts its state here once the executors' blocks are in: wait for it, so
         // that a launcher stopping everything when this process ends leaves a resumable run.
         let every = schedule.checkpoint_every_updates;
-        match node::Cut::wait_for(&bus, last, Duration::from_secs(60), shutdown.clone()).await? {
+        match node::wait_for_cut(&bus, last, Duration::from_secs(60), shutdown.clone()).await? {
             CutWait::Cut => {
                 tracing::info!(step = last, "deterministic mode: every role's state is saved at this step")
             }
@@ -274,7 +275,7 @@ async fn deterministic_resume(
     checkpoints: Option<&CheckpointDir>,
     shutdown: Shutdown,
 ) -> anyhow::Result<Option<Option<agent::Checkpoint>>> {
-    let Some(cut) = node::Cut::ask(bus, shutdown).await? else { return Ok(None) };
+    let Some(cut) = node::ask_cut(bus, shutdown).await? else { return Ok(None) };
     if cut.learner_step == 0 {
         if let Some(dir) = checkpoints
             && let Some(&newest) = dir.steps()?.last()

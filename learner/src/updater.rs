@@ -134,7 +134,7 @@ pub struct Updater {
     /// stamped on every weights frame, and they are embedded in every checkpoint.
     pub frozen: Frozen,
     /// Deterministic mode's schedule, whose checkpoint steps are the only ones resumable.
-    pub lockstep: Option<node::Lockstep>,
+    pub lockstep: Option<run::Lockstep>,
 }
 
 /// Whether `step` is one of the periodic checkpoints (every `checkpoint_every_epochs` epochs).

@@ -7,7 +7,9 @@ use anyhow::Context;
 use proto::{NodeId, Role, RunId};
 use tracing::Instrument;
 
-use crate::{Bus, BusConfig, NodeArgs, RoleConfig, Shutdown, config, telemetry};
+use run::RoleConfig;
+
+use crate::{Bus, BusConfig, NodeArgs, Shutdown, telemetry};
 
 /// Sets up tracing, loads and validates the role's config table, opens the bus, and runs the role until
 /// SIGINT/SIGTERM; returns the role's error, if any, for `main` to print and exit non-zero.
@@ -19,7 +21,7 @@ where
     R: Debug,
 {
     telemetry::init();
-    let config: C = config::load(args.config.as_deref())?;
+    let config = C::load(args.config.as_deref())?;
     let run_id = RunId::new(args.run_id.clone())?;
     let node = NodeId { role, id: args.id };
     let bus = Bus::open(run_id, node, &BusConfig::from(args))

@@ -2,6 +2,7 @@
 //! table names the task's dimensions.
 
 use agent::AgentConfig;
+use run::RunSpec;
 use serde::Deserialize;
 
 use crate::{BarrierRule, Schema};
@@ -38,7 +39,7 @@ pub struct ParamServerConfig {
     /// `[hierarchy]`: the frozen levels this role serves to executors (`params/frozen`), and whose
     /// content hash every weights frame must carry.
     #[serde(skip)]
-    pub hierarchy: node::HierarchyKeys,
+    pub hierarchy: run::HierarchyKeys,
 }
 
 impl Default for ParamServerConfig {
@@ -51,7 +52,7 @@ impl Default for ParamServerConfig {
             stats_interval_ms: 1000,
             max_learner_steps_per_s: crate::step_guard::DEFAULT_MAX_LEARNER_STEPS_PER_S,
             networks: None,
-            hierarchy: node::HierarchyKeys::default(),
+            hierarchy: run::HierarchyKeys::default(),
         }
     }
 }
@@ -72,7 +73,7 @@ impl ParamServerConfig {
     }
 }
 
-impl node::RoleConfig for ParamServerConfig {
+impl run::RoleConfig for ParamServerConfig {
     const SECTION: &'static str = "param_server";
 
     fn validate(&self) -> Result<(), String> {
@@ -83,7 +84,7 @@ impl node::RoleConfig for ParamServerConfig {
             ("stats_interval_ms", self.stats_interval_ms),
             ("max_learner_steps_per_s", self.max_learner_steps_per_s),
         ];
-        if let Some(key) = node::config::first_zero(&positive) {
+        if let Some(key) = run::table::first_zero(&positive) {
             return Err(format!("{key} must be > 0"));
         }
         match &self.networks {
@@ -94,26 +95,15 @@ impl node::RoleConfig for ParamServerConfig {
 
     /// The `[param_server]` and `[hierarchy]` tables, and the run's networks: the `[agent]` table
     /// (over the level-above defaults in a hierarchy) with the widths of `[train] task` and `[her]`.
-    fn parse(text: &str) -> Result<Self, String> {
-        let mut config: Self = node::config::parse_section(text, Self::SECTION)?;
-        config.hierarchy =
-            node::config::parse_section(text, "hierarchy").map_err(|e| format!("[hierarchy] {e}"))?;
-        let keys: node::RunKeys = node::config::parse_section(text, "train")?;
-        let her: sim::her::HerConfig =
-            node::config::parse_section(text, "her").map_err(|e| format!("[her] {e}"))?;
-        let task: sim::Task = keys.task.parse().map_err(|e| format!("[train] task: {e}"))?;
-        let dims = her.dims(task);
-        let base = AgentConfig::default_at_level(config.hierarchy.depth());
-        let agent: AgentConfig =
-            node::config::parse_section_over(text, "agent", &base).map_err(|e| format!("[agent] {e}"))?;
-        config.networks = Some(AgentConfig { obs_dim: dims.obs_dim, act_dim: dims.act_dim, ..agent });
-        Ok(config)
+    fn from_spec(spec: &RunSpec) -> Result<Self, String> {
+        let config: Self = spec.table(Self::SECTION)?;
+        Ok(Self { networks: Some(AgentConfig::from_run(spec)?), hierarchy: spec.hierarchy.clone(), ..config })
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use node::RoleConfig;
+    use run::RoleConfig;
 
     use super::*;
 

@@ -187,7 +187,7 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
 
 /// The newest weights frame and the one before it, as received. Deterministic mode's executors ask
 /// for an exact version, and the learner may publish the next while an executor still needs this
-/// one (`node::lockstep`), never two ahead.
+/// one (`run::lockstep`), never two ahead.
 #[derive(Debug, Default)]
 struct Held {
     latest: Option<(u64, zenoh::bytes::ZBytes)>,
@@ -216,7 +216,7 @@ impl Held {
 /// The frozen levels named by `[hierarchy]`, read and checked (they must chain), with their
 /// content hash; `None` for a single-level run.
 pub fn frozen_levels(
-    hierarchy: &node::HierarchyKeys,
+    hierarchy: &run::HierarchyKeys,
 ) -> anyhow::Result<Option<(proto::ContentHash, proto::FrozenLevels)>> {
     if hierarchy.depth() == 0 {
         return Ok(None);

@@ -69,11 +69,13 @@ pub enum MessageKind {
     FrozenLevels = 12,
     /// [`crate::DurableMarks`].
     DurableMarks = 13,
+    /// [`crate::ReplayCut`].
+    ReplayCut = 14,
 }
 
 impl MessageKind {
     /// Every kind, in wire-byte order.
-    pub const ALL: [MessageKind; 13] = [
+    pub const ALL: [MessageKind; 14] = [
         MessageKind::ExperienceBatch,
         MessageKind::SampleRequest,
         MessageKind::SampleReply,
@@ -87,6 +89,7 @@ impl MessageKind {
         MessageKind::EvalReport,
         MessageKind::FrozenLevels,
         MessageKind::DurableMarks,
+        MessageKind::ReplayCut,
     ];
 
     /// The kind with this wire byte, if any.
@@ -250,7 +253,7 @@ mod tests {
             assert_eq!(MessageKind::from_u8(kind as u8), Some(kind));
         }
         assert_eq!(MessageKind::from_u8(0), None);
-        assert_eq!(MessageKind::from_u8(14), None);
+        assert_eq!(MessageKind::from_u8(15), None);
     }
 
     #[test]

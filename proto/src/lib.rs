@@ -5,23 +5,9 @@
 //!
 //! Every key lives under `rl/<run_id>/` ([`RunId`], [`topics`]); `<id>` is a decimal `u32`.
 //!
-//! | key under `rl/<run>/`              | message                                               | publisher                                        | subscribers                                                  |
-//! |------------------------------------|-------------------------------------------------------|--------------------------------------------------|--------------------------------------------------------------|
-//! | `experience/<executor_id>`         | [`ExperienceBatch`]                                   | executor                                         | replay server (`experience/*`)                               |
-//! | `replay/sample` (queryable)        | [`SampleRequest`] → [`SampleReply`]                   | learner queries                                  | replay server replies                                        |
-//! | `replay/priorities`                | [`PriorityUpdate`]                                    | learner                                          | replay server                                                |
-//! | `replay/durable`                   | [`DurableMarks`]                                      | replay server                                    | executors (spools)                                           |
-//! | `replay/state` (queryable, `?k=N`) | [`StatsReport`] (state, newest cut, top-k priorities) | learner and executors query (deterministic mode) | replay server replies                                        |
-//! | `params/publish`                   | [`WeightsSnapshot`]                                   | learner                                          | param server                                                 |
-//! | `params/weights` (queryable)       | [`WeightsSnapshot`] (`?version=V`)                    | param server replies                             | executors query on a newer version                           |
-//! | `params/frozen` (queryable)        | [`FrozenLevels`] (hierarchies only)                   | param server replies                             | executors query once                                         |
-//! | `control/learner`                  | [`LearnerStep`]                                       | learner                                          | param server                                                 |
-//! | `control/step`                     | [`GlobalStep`]                                        | param server                                     | executors, learner, monitor                                  |
-//! | `control/barrier/<executor_id>`    | [`BarrierReport`]                                     | executor                                         | param server, monitor                                        |
-//! | `eval`                             | [`EvalReport`]                                        | learner                                          | monitor                                                      |
-//! | `stats/<role>/<id>`                | [`StatsReport`]                                       | every process                                    | monitor (`stats/**`)                                         |
-//! | `episodes/<executor_id>`           | [`EpisodeReport`]                                     | executor                                         | monitor (`episodes/*`)                                       |
-//! | `liveliness/<role>/<id>`           | zenoh liveliness token, no payload                    | every role                                       | param server (barrier), executors (replay server's), monitor |
+//! [`registry::TOPICS`] lists every topic family with its message, who writes it and who reads
+//! it; the docs' key table (`docs/distributed.md`) and `deploy/certs.sh`'s access control are
+//! generated from it.
 //!
 //! # Parts
 //!
@@ -61,10 +47,12 @@ mod blob;
 mod check;
 pub mod codec;
 pub mod control;
+pub mod cut;
 pub mod durable;
 pub mod error;
 pub mod experience;
 pub mod params;
+pub mod registry;
 pub mod sampling;
 pub mod stats;
 pub mod topics;
@@ -72,6 +60,7 @@ pub mod topics;
 pub use check::{MAX_BATCH_LEN, MAX_DIM, MAX_NAME_LEN, MAX_STATS_ENTRIES, MAX_TEXT_LEN};
 pub use codec::{FORMAT_VERSION, Message, MessageKind, decode, encode, peek_kind};
 pub use control::{BarrierReport, EvalMode, EvalReport, GlobalStep, LearnerStep};
+pub use cut::{CutState, ReplayCut};
 pub use durable::{DurableMarks, MAX_STREAM_MARKS, StreamMark};
 pub use error::{DecodeError, Result, TopicError, ValidationError};
 pub use experience::{ExperienceBatch, Transition, Transitions};

@@ -111,7 +111,7 @@ pub struct NodeId {
     pub id: u32,
 }
 
-/// Every concrete topic of a run; see the table in the crate docs for who publishes what.
+/// Every concrete topic of a run; [`crate::registry`] says who publishes or serves each.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Topic {
     /// `experience/<executor_id>`: [`crate::ExperienceBatch`], executor → replay server.
@@ -128,6 +128,9 @@ pub enum Topic {
     /// `replay/state` (`?k=N`): queryable; the replay server replies with a [`crate::StatsReport`] of
     /// its state and top-k priorities.
     ReplayState,
+    /// `replay/cut`: queryable; the replay server replies with a [`crate::ReplayCut`], where a
+    /// deterministic run resumes.
+    ReplayCut,
     /// `params/weights`: queryable; the param server replies with a [`crate::WeightsSnapshot`], the
     /// newest or the `?version=V` asked for.
     ParamsWeights,
@@ -166,6 +169,7 @@ impl Topic {
             Topic::ReplayPriorities => "replay/priorities".to_string(),
             Topic::ReplayDurable => "replay/durable".to_string(),
             Topic::ReplayState => "replay/state".to_string(),
+            Topic::ReplayCut => "replay/cut".to_string(),
             Topic::ParamsWeights => "params/weights".to_string(),
             Topic::ParamsPublish => "params/publish".to_string(),
             Topic::ParamsFrozen => "params/frozen".to_string(),
@@ -191,6 +195,7 @@ impl Topic {
             ["replay", "priorities"] => Topic::ReplayPriorities,
             ["replay", "durable"] => Topic::ReplayDurable,
             ["replay", "state"] => Topic::ReplayState,
+            ["replay", "cut"] => Topic::ReplayCut,
             ["params", "weights"] => Topic::ParamsWeights,
             ["params", "publish"] => Topic::ParamsPublish,
             ["params", "frozen"] => Topic::ParamsFrozen,
@@ -471,6 +476,7 @@ mod tests {
             Topic::ReplayPriorities,
             Topic::ReplayDurable,
             Topic::ReplayState,
+            Topic::ReplayCut,
             Topic::ParamsWeights,
             Topic::ParamsPublish,
             Topic::ParamsFrozen,

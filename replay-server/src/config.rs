@@ -9,6 +9,7 @@
 use std::path::PathBuf;
 
 use replay::{Dims, ReplayBuffer, ReplayConfig};
+use run::RunSpec;
 use serde::Deserialize;
 
 use crate::limiter::LimiterConfig;
@@ -23,10 +24,6 @@ pub enum InitialPriority {
     /// The current maximum priority (1 when empty), ignoring the executor's TD errors: the paper's rule.
     Max,
 }
-
-/// `SACLSP_REPLAY_SNAPSHOT`: overrides `snapshot_path`, so a launcher can keep each run's snapshot
-/// in its folder without editing the shared run file.
-pub const SNAPSHOT_PATH_ENV: &str = "SACLSP_REPLAY_SNAPSHOT";
 
 /// Configuration of the replay-server role. Every field has a documented default.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -47,7 +44,7 @@ pub struct ReplayServerConfig {
     /// experience is staged and inserted by the schedule, and the limiter and minimum size are
     /// replaced by it.
     #[serde(skip)]
-    pub lockstep: Option<node::Lockstep>,
+    pub lockstep: Option<run::Lockstep>,
     /// Source of new transitions' priorities. Default `td_error`.
     pub initial_priority: InitialPriority,
     /// No sampling below this many stored transitions. Default 10_000 (the paper's warm-up).
@@ -288,7 +285,7 @@ impl ReplayServerConfig {
     }
 }
 
-impl node::RoleConfig for ReplayServerConfig {
+impl run::RoleConfig for ReplayServerConfig {
     const SECTION: &'static str = "replay_server";
 
     fn validate(&self) -> Result<(), String> {
@@ -297,31 +294,22 @@ impl node::RoleConfig for ReplayServerConfig {
 
     /// Its table, the buffer's (`[replay]`), and the widths of the run's task: `[train] task` and `[her]`, as the learner and
     /// the executors size their networks, so no table of a run file can disagree with another.
-    fn parse(text: &str) -> Result<Self, String> {
-        if text.lines().any(|l| l.trim_start().starts_with("[replay_server.buffer]")) {
-            return Err("[replay_server.buffer] is now [replay]: one table holds the buffer's settings for \
-                        single-machine and distributed runs"
-                .into());
-        }
-        let mut config: ReplayServerConfig = node::config::parse_section(text, Self::SECTION)?;
-        config.buffer = node::config::parse_section(text, "replay").map_err(|e| format!("[replay] {e}"))?;
-        let keys: node::RunKeys = node::config::parse_section(text, "train")?;
-        let her: sim::her::HerConfig =
-            node::config::parse_section(text, "her").map_err(|e| format!("[her] {e}"))?;
-        let task: sim::Task = keys.task.parse().map_err(|e| format!("[train] task: {e}"))?;
-        let dims = her.dims(task);
+    fn from_spec(spec: &RunSpec) -> Result<Self, String> {
+        let mut config: ReplayServerConfig = spec.table(Self::SECTION)?;
+        config.buffer = spec.table("replay")?;
+        let dims = spec.dims();
         (config.obs_dim, config.act_dim) = (dims.obs_dim as u32, dims.act_dim as u32);
-        if let Some(path) = std::env::var_os(SNAPSHOT_PATH_ENV) {
-            config.snapshot_path = Some(path.into());
+        if let Some(path) = &spec.overrides.replay_snapshot {
+            config.snapshot_path = Some(path.clone());
         }
-        config.lockstep = node::Lockstep::from_run_file(text)?;
+        config.lockstep = spec.lockstep;
         Ok(config)
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use node::RoleConfig;
+    use run::RoleConfig;
 
     use super::*;
 

@@ -1,4 +1,4 @@
-//! Deterministic mode's replay side, sans-IO (`node::lockstep` has the schedule): experience is
+//! Deterministic mode's replay side, sans-IO (`run::lockstep` has the schedule): experience is
 //! staged per (block, executor) as it arrives and enters the buffer only when a round's first
 //! sample needs it, in the canonical order; priority updates are queued and applied only up to the
 //! step of the previous sample request. So what a sample sees depends on the schedule alone, never
@@ -81,7 +81,7 @@ pub enum Plan {
 /// The staging state.
 #[derive(Debug, Clone)]
 pub struct Lockstep {
-    schedule: node::Lockstep,
+    schedule: run::Lockstep,
     /// Env steps each executor has delivered (its batches arrive in order).
     progress: Vec<u64>,
     /// Batches not yet in the buffer, by (block, executor), each executor's in arrival order.
@@ -119,7 +119,7 @@ pub struct Saved {
 
 impl Lockstep {
     /// Nothing staged, nothing served.
-    pub fn new(schedule: node::Lockstep) -> Self {
+    pub fn new(schedule: run::Lockstep) -> Self {
         Self {
             schedule,
             progress: vec![0; schedule.executors as usize],
@@ -139,7 +139,7 @@ impl Lockstep {
     }
 
     /// Picks up where a cut left off.
-    pub fn restore(schedule: node::Lockstep, saved: Saved) -> Self {
+    pub fn restore(schedule: run::Lockstep, saved: Saved) -> Self {
         let mut restored = Self::new(schedule).with_cuts();
         restored.progress = saved.progress;
         restored.progress.resize(schedule.executors as usize, 0);
@@ -273,8 +273,8 @@ impl Lockstep {
 mod tests {
     use super::*;
 
-    fn schedule() -> node::Lockstep {
-        node::Lockstep::new(node::LockstepKeys {
+    fn schedule() -> run::Lockstep {
+        run::Lockstep::new(run::LockstepKeys {
             executors: 2,
             warm_up_transitions: 8,
             updates_per_round: 10,
@@ -332,7 +332,7 @@ mod tests {
 
     #[test]
     fn the_state_is_cut_at_a_checkpoint_before_its_sample_and_restored_from_the_cut() {
-        let schedule = node::Lockstep { checkpoint_every_updates: 20, ..schedule() };
+        let schedule = run::Lockstep { checkpoint_every_updates: 20, ..schedule() };
         let mut l = Lockstep::new(schedule).with_cuts();
         // Blocks 0..=2 end at env step 10; executor 1 is already into block 3.
         l.stage(batch(0, 10, 2)).unwrap();

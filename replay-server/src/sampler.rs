@@ -200,3 +200,31 @@ pub(crate) async fn state_loop(
     }
     Ok(())
 }
+
+/// Answers `replay/cut`: where a deterministic run resumes (`None` in normal mode).
+pub(crate) async fn cut_loop(ctx: Arc<Ctx>, queries: QueryQueue, mut shutdown: Shutdown) -> anyhow::Result<()> {
+    loop {
+        let query = tokio::select! {
+            biased;
+            _ = shutdown.wait() => break,
+            received = queries.recv() => match received {
+                Ok(query) => query,
+                Err(_) => break,
+            },
+        };
+        let reply = {
+            let service = ctx.service.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            proto::ReplayCut {
+                lockstep: service.lockstep().map(|l| proto::CutState {
+                    learner_step: l.last_cut(),
+                    cuts: l.cuts(),
+                    progress: l.progress().to_vec(),
+                }),
+            }
+        };
+        if let Err(e) = query.reply(query.key_expr().clone(), proto::encode(&reply)).express(true).await {
+            tracing::debug!(error = %e, "could not send a cut reply");
+        }
+    }
+    Ok(())
+}

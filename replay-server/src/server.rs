@@ -113,11 +113,13 @@ pub(crate) async fn start(
         bus.subscribe(Topic::ReplayPriorities, queue).await.context("the priority subscriber")?;
     let sample = bus.queryable(Topic::ReplaySample, queue).await.context("the sample queryable")?;
     let state = bus.queryable(Topic::ReplayState, 16).await.context("the state queryable")?;
+    let cut = bus.queryable(Topic::ReplayCut, 16).await.context("the cut queryable")?;
     let mut tasks = JoinSet::new();
     tasks.spawn(experience_loop(Arc::clone(ctx), experience, shutdown.clone()));
     tasks.spawn(priority_loop(Arc::clone(ctx), priorities, shutdown.clone()));
     tasks.spawn(sampler::sample_loop(Arc::clone(ctx), sample, shutdown.clone()));
     tasks.spawn(sampler::state_loop(Arc::clone(ctx), state, shutdown.clone()));
+    tasks.spawn(sampler::cut_loop(Arc::clone(ctx), cut, shutdown.clone()));
     tasks.spawn(stats_loop(Arc::clone(ctx), shutdown.clone()));
     // In deterministic mode snapshots are the schedule's cuts, never a timer's.
     if ctx.cfg.snapshots_enabled() && ctx.cfg.snapshot_interval_s > 0 && ctx.cfg.lockstep.is_none() {

@@ -124,9 +124,6 @@ pub fn build(service: &Service, inputs: &ReportInputs<'_>) -> StatsReport {
     if let Some(lockstep) = service.lockstep() {
         metric("lockstep.cut", lockstep.last_cut() as f64);
         metric("lockstep.cuts", f64::from(u8::from(lockstep.cuts())));
-        for (id, env_steps) in lockstep.progress().iter().enumerate() {
-            metric(&format!("lockstep.progress.{id}"), *env_steps as f64);
-        }
     }
     metric("memory_planned_bytes", inputs.memory_planned_bytes as f64);
     if let Some(replica) = service.replica() {

@@ -31,7 +31,7 @@ fn raw_physics(actions: &[[f64; 8]]) -> f64 {
 
 /// Steps/s of the ant-v5 environment with the same controls (no resets, like the raw loop).
 fn environment(actions: &[[f64; 8]]) -> f64 {
-    let mut env = Task::AntV5.make(0).expect("bench set-up");
+    let mut env = sim::make(Task::AntV5, 0).expect("bench set-up");
     let nv = env.spec().nv;
     let mut qpos = vec![0.0; env.spec().nq];
     qpos[2] = 0.75;

@@ -37,8 +37,8 @@ pub enum EnvError {
         index: usize,
     },
     /// The task name is not one of the known tasks.
-    #[error("unknown task {0:?}; known tasks: ant-v5, ant-rllab, inverted-pendulum")]
-    UnknownTask(String),
+    #[error(transparent)]
+    UnknownTask(#[from] run::UnknownTask),
     /// A picture that cannot be drawn.
     #[error("cannot render: {0}")]
     Render(String),

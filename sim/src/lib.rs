@@ -33,7 +33,8 @@ mod task;
 
 pub use error::EnvError;
 pub use spec::{EnvSpec, InitState, RewardTerms, Step};
-pub use task::{Dims, Task};
+pub use run::{Dims, Task};
+pub use task::make;
 
 /// One simulated task, stepped by one thread. Resets are deterministic given the seed.
 pub trait Environment: Send {

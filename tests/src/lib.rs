@@ -20,7 +20,8 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow, bail};
-use node::{Bus, BusConfig, Faults, RoleConfig, Shutdown, ShutdownTrigger};
+use node::{Bus, BusConfig, Faults, Shutdown, ShutdownTrigger};
+use run::RoleConfig;
 use proto::{GlobalStep, LearnerStep, Message, NodeId, Role, RunId, topics};
 use tokio::task::JoinHandle;
 

@@ -41,7 +41,7 @@ fn with_frozen_levels_every_role_trains_the_level_above_settings() -> anyhow::Re
         assert!(!agent.squash && !agent.embedding_output_relu, "{agent:?}");
         assert_eq!(agent.scale_reward, 3.0);
     }
-    assert_eq!((learner.hierarchy.depth(), executor.hierarchy.depth(), param.hierarchy.depth()), (1, 1, 1));
+    assert_eq!((learner.run.hierarchy.depth(), executor.run.hierarchy.depth(), param.hierarchy.depth()), (1, 1, 1));
     // A key the table sets wins over the level-above default.
     let scaled = text.replace("scale_reward = 3.0", "scale_reward = 7.0");
     assert_eq!(role_config::<learner::LearnerConfig>(&scaled)?.agent.scale_reward, 7.0);
@@ -55,8 +55,9 @@ fn widths_agree(text: &str) -> anyhow::Result<()> {
     let executor = role_config::<executor::ExecutorConfig>(text)?;
     let replay = role_config::<replay_server::ReplayServerConfig>(text)?;
     let param = role_config::<param_server::ParamServerConfig>(text)?;
-    let task: sim::Task = learner.train.task.parse()?;
-    let want = learner.her.dims(task);
+    // The widths of the environment the executors step, built: not the run crate's table of them.
+    let env = sim::her::make(&learner.run.her, learner.run.task, 0)?;
+    let want = sim::Dims { obs_dim: env.spec().obs_dim, act_dim: env.spec().act_dim };
     let mut widths = vec![
         ("learner [agent]", learner.agent.obs_dim, learner.agent.act_dim),
         ("executor [agent]", executor.agent.obs_dim, executor.agent.act_dim),
@@ -68,7 +69,8 @@ fn widths_agree(text: &str) -> anyhow::Result<()> {
     for (table, obs, act) in widths {
         anyhow::ensure!(
             (obs, act) == (want.obs_dim, want.act_dim),
-            "{table} has widths ({obs}, {act}), the task {task} ({}, {})",
+            "{table} has widths ({obs}, {act}), the task {} ({}, {})",
+            learner.run.task,
             want.obs_dim,
             want.act_dim
         );

@@ -20,32 +20,26 @@ pub struct RunConfig {
     /// The replay buffer.
     pub replay: ReplayConfig,
     /// Frozen levels below the trained one (`[hierarchy]`); none by default.
-    pub hierarchy: node::HierarchyKeys,
+    pub hierarchy: run::HierarchyKeys,
     /// Hindsight experience replay (`[her]`); off by default.
-    pub her: sim::her::HerConfig,
+    pub her: run::HerConfig,
 }
 
 impl RunConfig {
     /// Reads the tables of `path` (defaults for missing tables; unknown keys are errors) and fits the
     /// agent's dimensions to the task.
     pub fn load(path: Option<&Path>) -> Result<Self> {
-        let text = match path {
-            Some(p) => std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?,
-            None => String::new(),
-        };
-        let hierarchy: node::HierarchyKeys = parse_table(&text, path, "hierarchy")?;
-        // On top of frozen levels, [agent] keys override the level-above settings instead.
-        let base = AgentConfig::default_at_level(hierarchy.depth());
-        let agent = node::config::parse_section_over(&text, "agent", &base).map_err(|e| {
+        let spec = run::RunSpec::load(path)?;
+        let in_file = |e: String| {
             let file = path.map(|p| format!("{}: ", p.display())).unwrap_or_default();
-            anyhow::anyhow!("{file}[agent]: {e}")
-        })?;
+            anyhow::anyhow!("{file}{e}")
+        };
         let config = RunConfig {
-            train: parse_table(&text, path, "train")?,
-            agent,
-            replay: parse_table(&text, path, "replay")?,
-            hierarchy,
-            her: parse_table(&text, path, "her")?,
+            train: spec.table("train").map_err(in_file)?,
+            agent: AgentConfig::from_run(&spec).map_err(in_file)?,
+            replay: spec.table("replay").map_err(in_file)?,
+            hierarchy: spec.hierarchy.clone(),
+            her: spec.her.clone(),
         };
         config.fitted()
     }
@@ -77,15 +71,4 @@ impl RunConfig {
     pub fn dims(&self) -> Dims {
         Dims { obs_dim: self.agent.obs_dim, act_dim: self.agent.act_dim }
     }
-}
-
-fn parse_table<T: serde::de::DeserializeOwned + Default>(
-    text: &str,
-    path: Option<&Path>,
-    name: &str,
-) -> Result<T> {
-    node::config::parse_section(text, name).map_err(|e| {
-        let file = path.map(|p| format!("{}: ", p.display())).unwrap_or_default();
-        anyhow::anyhow!("{file}[{name}]: {e}")
-    })
 }

@@ -280,7 +280,7 @@ mod tests {
                 ..AgentConfig::default()
             },
             replay: ReplayConfig { capacity_transitions: 1000, mode, ..ReplayConfig::default() },
-            hierarchy: node::HierarchyKeys::default(),
+            hierarchy: run::HierarchyKeys::default(),
             her: sim::her::HerConfig::default(),
         }
         .fitted()

@@ -123,7 +123,7 @@ mod tests {
     #[test]
     fn the_goal_follows_the_observation_and_each_step_reports_its_distance() {
         let her = HerConfig { goal: GoalKind::Speed, ..HerConfig::default() };
-        let mut env = her.make(Task::AntRllab, 5).unwrap();
+        let mut env = crate::her::make(&her, Task::AntRllab, 5).unwrap();
         assert_eq!(env.spec().obs_dim, 125 + 14);
         let first = env.reset(Some(5));
         let goal = first[125..].to_vec();

@@ -2,12 +2,12 @@
 //!
 //! | file | what |
 //! |---|---|
-//! | `config.rs` | [`HerConfig`]: the `[her]` table; goal kinds, reward forms, thresholds |
+//! | `config.rs` | [`make`], [`hindsight`]: what the `[her]` table ([`HerConfig`], `run`'s) builds |
 //! | `env.rs` | [`GoalEnv`]: a task whose observation ends with the episode's goal |
 //! | `relabel.rs` | [`Hindsight`]: the stored reward, and the "future" relabelling at an episode's end |
 //!
 //! A goal is a target for a slice of the observation: the joint velocities qvel (a **speed** goal,
-//! the dissertation code's) or the torso's x, y (a **position** goal). [`HerConfig::make`] builds
+//! the dissertation code's) or the torso's x, y (a **position** goal). [`make`] builds
 //! the task every role steps, so the networks' input (observation ++ goal) follows from it.
 //! The environment's own reward is what every evaluation reports (the dissertation's Table 5.2);
 //! the goal-shaped reward is what the learner trains on, and [`GoalStatus`] on each step says
@@ -17,6 +17,7 @@ mod config;
 mod env;
 mod relabel;
 
-pub use config::{GoalKind, GoalReward, HerConfig};
+pub use config::{hindsight, make};
+pub use run::{GoalKind, GoalReward, HerConfig};
 pub use env::{GoalEnv, GoalStatus};
 pub use relabel::{Hindsight, Relabelled};

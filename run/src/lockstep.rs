@@ -24,12 +24,8 @@
 //! checkpoint step, so a resumed executor only needs the step ([`Lockstep::cut_seed`]).
 
 use serde::Deserialize;
+use crate::overrides::EXECUTORS_ENV;
 
-/// Environment variable that turns deterministic mode on (`1`) whatever `[train] deterministic` says:
-/// `deploy/local.sh` sets it for `DETERMINISTIC=1`.
-pub const DETERMINISTIC_ENV: &str = "SACLSP_DETERMINISTIC";
-/// Environment variable giving `[lockstep] executors` (the launcher knows how many it starts).
-pub const EXECUTORS_ENV: &str = "SACLSP_EXECUTORS";
 
 /// The `[lockstep]` table: deterministic mode's schedule (read only when `[train] deterministic`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -73,13 +69,13 @@ pub struct Lockstep {
 
 impl Lockstep {
     /// The schedule of a run file: `None` unless `[train] deterministic = true` (or
-    /// `SACLSP_DETERMINISTIC=1`); then `[lockstep]`, with `SACLSP_EXECUTORS` over its `executors`.
-    pub fn from_run_file(text: &str) -> Result<Option<Lockstep>, String> {
-        #[derive(Deserialize, Default)]
-        struct Train {
-            #[serde(default)]
-            deterministic: bool,
-        }
+    /// `SACLSP_DETERMINISTIC=1`); then `[lockstep]`, with `SACLSP_EXECUTORS` over its `executors`,
+    /// and the learner's checkpoint period from `[learner]`.
+    pub(crate) fn from_document(
+        document: &toml::Table,
+        deterministic: bool,
+        executors: Option<u32>,
+    ) -> Result<Option<Lockstep>, String> {
         /// The learner's checkpoint period, as its `[learner]` table gives it (same defaults).
         #[derive(Deserialize)]
         #[serde(default)]
@@ -92,20 +88,14 @@ impl Lockstep {
                 Self { epoch_length_updates: 1000, checkpoint_every_epochs: 100 }
             }
         }
-        let train: Train = crate::config::parse_section(text, "train")?;
-        let on = match std::env::var(DETERMINISTIC_ENV) {
-            Ok(value) => value == "1",
-            Err(_) => train.deterministic,
-        };
-        if !on {
+        if !deterministic {
             return Ok(None);
         }
-        let mut keys: LockstepKeys =
-            crate::config::parse_section(text, "lockstep").map_err(|e| format!("[lockstep] {e}"))?;
-        if let Ok(n) = std::env::var(EXECUTORS_ENV) {
-            keys.executors = n.parse().map_err(|e| format!("{EXECUTORS_ENV}={n}: {e}"))?;
+        let mut keys: LockstepKeys = crate::table::table(document, "lockstep")?;
+        if let Some(n) = executors {
+            keys.executors = n;
         }
-        let c: Checkpoints = crate::config::parse_section(text, "learner")?;
+        let c: Checkpoints = crate::table::table(document, "learner")?;
         let mut schedule = Self::new(keys)?;
         schedule.checkpoint_every_updates = c.epoch_length_updates.saturating_mul(c.checkpoint_every_epochs);
         if !schedule.checkpoint_every_updates.is_multiple_of(schedule.updates_per_round) {
@@ -126,7 +116,7 @@ impl Lockstep {
             ("updates_per_round", keys.updates_per_round),
             ("env_steps_per_round", keys.env_steps_per_round),
         ];
-        if let Some(key) = crate::config::first_zero(&positive) {
+        if let Some(key) = crate::table::first_zero(&positive) {
             return Err(format!(
                 "[lockstep] {key} must be > 0 in deterministic mode (executors: or {EXECUTORS_ENV})"
             ));
@@ -157,7 +147,7 @@ impl Lockstep {
     /// The seed executor `id`'s streams restart from at checkpoint step `at`.
     pub fn cut_seed(seed: u64, id: u32, at: u64) -> u64 {
         // splitmix64's increment spreads consecutive checkpoints apart before the executor's mix.
-        crate::config::mix_seed(seed ^ at.wrapping_mul(0x9E37_79B9_7F4A_7C15), id)
+        crate::seed::mix_seed(seed ^ at.wrapping_mul(crate::seed::GOLDEN), id)
     }
 
     /// The round learner step `step` is in.
@@ -244,19 +234,22 @@ mod tests {
 
     #[test]
     fn off_unless_asked_and_zeros_are_named() {
-        assert_eq!(Lockstep::from_run_file("[train]\nseed = 1\n"), Ok(None));
-        let err = Lockstep::from_run_file("[train]\ndeterministic = true\n").unwrap_err();
+        let from_run_file = |text: &str| {
+            crate::RunSpec::parse_with(text, &crate::Overrides::default()).map(|spec| spec.lockstep)
+        };
+        assert_eq!(from_run_file("[train]\nseed = 1\n"), Ok(None));
+        let err = from_run_file("[train]\ndeterministic = true\n").unwrap_err();
         assert!(err.contains("executors"), "{err}");
         let on = "[train]\ndeterministic = true\n[lockstep]\nexecutors = 2\nupdates_per_round = 25\n";
-        let s = Lockstep::from_run_file(on).unwrap().unwrap();
+        let s = from_run_file(on).unwrap().unwrap();
         assert_eq!((s.executors, s.warm_up_steps, s.updates_per_round), (2, 5000, 25));
         assert_eq!(s.checkpoint_every_updates, 100_000, "the learner's defaults: 100 epochs of 1000");
         let odd = format!("{on}[learner]\nepoch_length_updates = 110\ncheckpoint_every_epochs = 1\n");
         assert!(
-            Lockstep::from_run_file(&odd).unwrap_err().contains("multiple of [lockstep] updates_per_round")
+            from_run_file(&odd).unwrap_err().contains("multiple of [lockstep] updates_per_round")
         );
         assert!(
-            Lockstep::from_run_file("[train]\ndeterministic = true\n[lockstep]\nexecutor = 2\n").is_err()
+            from_run_file("[train]\ndeterministic = true\n[lockstep]\nexecutor = 2\n").is_err()
         );
     }
 }
