@@ -10,7 +10,10 @@
 //! fetching weights), one a certificate of another authority claiming to be the learner. None of what
 //! they send may reach a role: every role's rejection counters stay empty (without access control,
 //! each forged frame is counted there), no sample reply comes back, and the run goes on to its end.
-//! Needs root, `ip` and `openssl` (CI has them); elsewhere it says so and passes without running.
+//! Needs root, `ip` and `openssl` (CI has them). Elsewhere a test prints `SKIPPED: <why>` to stderr
+//! (past the test harness's capture, so it shows in a passing run) and passes without running; with
+//! `SACLSP_REQUIRE_NETNS=1` in the environment (`.ci/run` sets it) it fails with that reason instead,
+//! so CI cannot pass without having run them.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
@@ -147,20 +150,54 @@ fn rejected(log: &str) -> Option<String> {
     Some(log[at..end].to_string())
 }
 
-/// Whether this machine can run the test; otherwise it says why, and the test passes without running.
-fn runnable(needs: &[&str]) -> bool {
-    let is_root = Command::new("id").arg("-u").output().is_ok_and(|o| o.stdout.starts_with(b"0"));
+/// Why this machine cannot run a test that needs the tools `needs` (besides root and `ip`), if it
+/// cannot.
+fn missing(needs: &[&str]) -> Option<String> {
+    let is_root = Command::new("id").arg("-u").output().is_ok_and(|o| o.stdout.trim_ascii() == b"0");
     if !is_root {
-        eprintln!("skipped: needs root for ip netns");
-        return false;
+        return Some("needs root for ip netns".into());
     }
     for tool in needs {
         if Command::new(tool).arg("version").output().is_err() {
-            eprintln!("skipped: needs {tool}");
-            return false;
+            return Some(format!("needs {tool}"));
         }
     }
-    true
+    None
+}
+
+/// The environment variable that makes a netns test that cannot run fail instead of skipping.
+const REQUIRE: &str = "SACLSP_REQUIRE_NETNS";
+
+/// What a netns test that cannot run (for `why`) does: `Err` (fail, with the reason) when `require`,
+/// else `Ok` with the line it prints before passing without running.
+fn skip_or_fail(test: &str, why: &str, require: bool) -> Result<String, String> {
+    if require {
+        Err(format!("{test} could not run and {REQUIRE}=1 requires it to: {why}"))
+    } else {
+        Ok(format!("SKIPPED: netns::{test}: {why} (it passes without running; {REQUIRE}=1 makes it fail)"))
+    }
+}
+
+/// A netns test that cannot run: panics when `SACLSP_REQUIRE_NETNS=1`, else prints `SKIPPED: ...` on
+/// the process's stderr itself, not through `eprintln!`, which the test harness captures and shows only
+/// for failures.
+fn skip(test: &str, why: &str) {
+    let require = std::env::var(REQUIRE).is_ok_and(|v| v == "1");
+    match skip_or_fail(test, why, require) {
+        Ok(line) => {
+            use std::io::Write;
+            let _ = writeln!(std::io::stderr().lock(), "{line}");
+        }
+        Err(failure) => panic!("{failure}"),
+    }
+}
+
+#[test]
+fn a_test_that_cannot_run_skips_visibly_or_fails_when_required() {
+    let skipped = skip_or_fail("t", "needs root for ip netns", false).expect("skips when not required");
+    assert!(skipped.starts_with("SKIPPED: netns::t: needs root for ip netns"), "{skipped}");
+    let failed = skip_or_fail("t", "needs openssl", true).expect_err("fails when required");
+    assert!(failed.contains("needs openssl") && failed.contains(REQUIRE), "{failed}");
 }
 
 /// How the cluster's processes talk: plain TCP, or TLS with the certificates and configs in a folder
@@ -313,12 +350,13 @@ fn scratch(test: &str) -> PathBuf {
 
 #[test]
 fn executors_in_another_namespace_feed_the_learner() {
-    if !runnable(&[]) {
-        return;
+    const TEST: &str = "executors_in_another_namespace_feed_the_learner";
+    if let Some(why) = missing(&[]) {
+        return skip(TEST, &why);
     }
     let ns = match Namespaces::create('p', false) {
         Ok(ns) => ns,
-        Err(why) => return eprintln!("skipped: cannot create network namespaces here: {why}"),
+        Err(why) => return skip(TEST, &format!("cannot create network namespaces here: {why}")),
     };
     let dir = scratch("plain");
     run_cluster(&ns, &dir, Transport::Plain, Vec::new()).assert_trained();
@@ -335,12 +373,13 @@ fn make_certs(dir: &Path, hosts: &[&str]) {
 
 #[test]
 fn an_authenticated_run_shuts_rogue_peers_out() {
-    if !runnable(&["openssl"]) {
-        return;
+    const TEST: &str = "an_authenticated_run_shuts_rogue_peers_out";
+    if let Some(why) = missing(&["openssl"]) {
+        return skip(TEST, &why);
     }
     let ns = match Namespaces::create('t', true) {
         Ok(ns) => ns,
-        Err(why) => return eprintln!("skipped: cannot create network namespaces here: {why}"),
+        Err(why) => return skip(TEST, &format!("cannot create network namespaces here: {why}")),
     };
     let dir = scratch("auth");
     let (certs, foreign) = (dir.join("certs"), dir.join("foreign"));
