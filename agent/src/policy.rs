@@ -8,7 +8,7 @@ use candle_core::{Result, Tensor};
 use candle_nn::VarBuilder;
 
 use crate::config::AgentConfig;
-use crate::coupling::{Coupling, CouplingSpec, Parity};
+use crate::coupling::{Coupling, CouplingOutput, CouplingSpec, Parity};
 use crate::density::policy_log_density;
 use crate::mlp::{Activation, BiasInit, Grad, Mlp, MlpSpec};
 
@@ -86,36 +86,12 @@ impl LatentPolicy {
 
     /// y = f(z; c) through the coupling layers in order, with log|det df/dz| = sum of all s.
     pub fn bijector_forward(&self, z: &Tensor, context: &Tensor) -> Result<BijectorOutput> {
-        let mut x = z.clone();
-        let mut log_det: Option<Tensor> = None;
-        for layer in &self.couplings {
-            let out = layer.forward(&x, context, Grad::Track)?;
-            x = out.output;
-            log_det = Some(match log_det {
-                None => out.log_det,
-                Some(acc) => (acc + out.log_det)?,
-            });
-        }
-        let log_det =
-            log_det.ok_or_else(|| candle_core::Error::Msg("policy without coupling layers".into()))?;
-        Ok(BijectorOutput { output: x, log_det })
+        fold(self.couplings.iter(), z, |layer, x| layer.forward(x, context, Grad::Track))
     }
 
     /// z = f^-1(y; c) through the coupling layers in reverse, with log|det dz/dy| = -sum of all s.
     pub fn bijector_inverse(&self, y: &Tensor, context: &Tensor) -> Result<BijectorOutput> {
-        let mut x = y.clone();
-        let mut log_det: Option<Tensor> = None;
-        for layer in self.couplings.iter().rev() {
-            let out = layer.inverse(&x, context, Grad::Track)?;
-            x = out.output;
-            log_det = Some(match log_det {
-                None => out.log_det,
-                Some(acc) => (acc + out.log_det)?,
-            });
-        }
-        let log_det =
-            log_det.ok_or_else(|| candle_core::Error::Msg("policy without coupling layers".into()))?;
-        Ok(BijectorOutput { output: x, log_det })
+        fold(self.couplings.iter().rev(), y, |layer, x| layer.inverse(x, context, Grad::Track))
     }
 
     fn squashed(&self, y: &Tensor) -> Result<Tensor> {
@@ -155,4 +131,25 @@ impl LatentPolicy {
         let y = self.bijector_forward(h, &self.embed(obs)?)?.output;
         self.squashed(&y)
     }
+}
+
+/// The bijector in one direction: `x` through `layers` in the order given, each mapped by `map` (a
+/// layer's forward or inverse), with the layers' log|det| summed in that order.
+fn fold<'a>(
+    layers: impl Iterator<Item = &'a Coupling>,
+    x: &Tensor,
+    map: impl Fn(&Coupling, &Tensor) -> Result<CouplingOutput>,
+) -> Result<BijectorOutput> {
+    let mut x = x.clone();
+    let mut log_det: Option<Tensor> = None;
+    for layer in layers {
+        let out = map(layer, &x)?;
+        x = out.output;
+        log_det = Some(match log_det {
+            None => out.log_det,
+            Some(acc) => (acc + out.log_det)?,
+        });
+    }
+    let log_det = log_det.ok_or_else(|| candle_core::Error::Msg("policy without coupling layers".into()))?;
+    Ok(BijectorOutput { output: x, log_det })
 }
