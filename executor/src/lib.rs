@@ -53,7 +53,7 @@ pub use inbox::{Control, Inbox, Taken};
 use node::{Bus, Delivery, Publisher, Rejects, Shutdown};
 use proto::{DurableMarks, GlobalStep, Topic};
 pub use rollout::{Rollout, StepOutcome};
-pub use spool::{LedgerEntry, Released, Spool, SpoolCounts, read_ledger};
+pub use spool::{Ledger, LedgerEntry, MadeMark, Released, Spool, SpoolCounts, read_ledger};
 use tokio::sync::{mpsc, watch};
 pub use worker::{Out, Progress, Wait, WorkerReport};
 use zenoh::sample::SampleKind;
@@ -74,6 +74,12 @@ pub struct Report {
     /// The spool's figures at shutdown, when it spools.
     pub spool: Option<SpoolCounts>,
 }
+
+/// Messages the rollout thread may have queued for the async shell (batches among them). With the
+/// batch each side holds and the rollout's pending transitions, this bounds what a killed executor
+/// loses in memory: at most `(OUT_QUEUE + 2) × batch_transitions` plus what one step adds (an
+/// episode's relabelled copies with `[her]`), counted by the spool's made marks.
+pub const OUT_QUEUE: usize = 64;
 
 /// Seeds of executor `id` in a run seeded `seed`: distinct streams per executor (splitmix64).
 pub fn executor_seed(seed: u64, id: u32) -> u64 {
@@ -120,6 +126,15 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
         ),
         None => None,
     };
+    let stream = if spool.is_some() { new_stream() } else { 0 };
+    // Durable experience: what the rollout makes is marked on disk before it can reach a batch, so
+    // what a kill leaves in memory is counted (`spool.rs`).
+    let made = match &spool {
+        Some(spool) => Some(
+            spool.made_mark(stream).map_err(|e| anyhow::anyhow!("creating the spool's made mark: {e}"))?,
+        ),
+        None => None,
+    };
     let mut rollout = Rollout::new(id, env, actor, seed)
         .with_episode_limit(config.executor.max_episode_steps)
         .with_hindsight(hindsight)
@@ -162,7 +177,7 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
     tracing::info!(seed, task = %config.run.task, spool = spool.is_some(), "executor up");
 
     let inbox = Arc::new(Inbox::default());
-    let (out_tx, mut out_rx) = mpsc::channel(64);
+    let (out_tx, mut out_rx) = mpsc::channel(OUT_QUEUE);
     let (wanted_tx, wanted_rx) = watch::channel(None);
     let lockstep = config.run.lockstep.map(|schedule| worker::Lockstep {
         schedule,
@@ -175,7 +190,7 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
         let (inbox, settings) = (inbox.clone(), config.executor.clone());
         std::thread::Builder::new()
             .name(format!("rollout-{id}"))
-            .spawn(move || worker::run(id, rollout, inbox, out_tx, settings, lockstep))?
+            .spawn(move || worker::run(id, rollout, inbox, out_tx, settings, lockstep, made))?
     };
 
     let mut report = Report::default();
@@ -296,15 +311,9 @@ async fn publish(
     let result = match message {
         Out::Experience(batch) => {
             let frame = match spool {
-                // The spool keeps it until it is durable; a batch failing the wire checks is
-                // dropped there, counted.
-                Some(spool) => match spool.push(&batch) {
-                    Ok(frame) => frame,
-                    Err(error) => {
-                        tracing::error!(%error, "could not spool a batch; sending it unspooled");
-                        Some(proto::encode(&batch))
-                    }
-                },
+                // The spool keeps it until it is durable; a batch failing the wire checks, or whose
+                // file cannot be written, is counted and named in the ledger there.
+                Some(spool) => spool.push(&batch),
                 None => Some(proto::encode(&batch)),
             };
             match frame {

@@ -7,15 +7,25 @@
 //! - `<stream>-<seq>.batch` (both hex, fixed width): one encoded [`ExperienceBatch`] frame (CRC'd by
 //!   `proto`), written to a temporary name and renamed, so a killed process leaves whole files;
 //! - `ledger`: one appended line per batch and outcome, the account a fault soak adds up:
-//!   `produced <stream> <seq> <transitions>` and `dropped <reason> <stream> <seq> <transitions>`.
+//!   `produced <stream> <seq> <transitions>` and `dropped <reason> <stream> <seq> <transitions>`,
+//!   the reasons `invalid` (failed the wire checks: never sent), `spool_overflow` (the oldest past
+//!   `spool_max_bytes`: sent, but no longer re-sent) and `spool_write` (its file could not be
+//!   written: sent once, unspooled);
+//! - `<stream>.made` (the stream in hex): one fixed-width decimal number, the transitions the
+//!   rollout of that stream has made so far ([`MadeMark`]), rewritten in place by the rollout thread after every step that
+//!   makes any, before they can reach a batch. What a killed process held in memory (its rollout's
+//!   pending transitions, batches on their way to the spool) is the stream's mark less what the
+//!   ledger names: the audit's "lost at kill", counted, never unexplained.
 //!
 //! A file is written before its `produced` line; a process killed in between leaves a file the
-//! ledger does not name, and the next start adds its line. Files survive a killed process, not a
-//! crashed machine (nothing is fsynced: that would cost a disk flush per batch).
+//! ledger does not name, and the next start adds its line. A ledger line that cannot be written is
+//! kept and written before the next one (the spool counts them meanwhile). Files survive a killed
+//! process, not a crashed machine (nothing is fsynced: that would cost a disk flush per batch).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, Write};
+use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 use proto::{DurableMarks, ExperienceBatch, Message};
@@ -38,6 +48,10 @@ pub struct SpoolCounts {
     pub overflow_batches: u64,
     /// Batches dropped because they failed the wire checks (non-finite TD errors).
     pub invalid_batches: u64,
+    /// Batches whose file could not be written: published once, unspooled (`dropped spool_write`).
+    pub write_failed_batches: u64,
+    /// Ledger lines not written yet (the ledger's disk failed); written before the next line.
+    pub ledger_backlog: u64,
     /// Batches held now.
     pub held_batches: u64,
     /// Bytes held now.
@@ -52,6 +66,8 @@ pub struct Spool {
     max_bytes: u64,
     held: BTreeMap<Key, u64>,
     ledger: File,
+    /// Ledger lines a failed write left over, written before the next one.
+    backlog: Vec<String>,
     counts: SpoolCounts,
     /// Per stream, the durable prefix the last marks gave and their snapshot's number.
     prefixes: BTreeMap<u64, (u64, u64)>,
@@ -82,6 +98,7 @@ impl Spool {
             max_bytes,
             held: BTreeMap::new(),
             ledger,
+            backlog: Vec::new(),
             counts: SpoolCounts::default(),
             prefixes: BTreeMap::new(),
         };
@@ -96,7 +113,7 @@ impl Spool {
             if !ledgered.contains(&key) {
                 // Written, then killed before its ledger line.
                 let transitions = decode(&fs::read(&path)?).map_or(0, |b| b.len() as u64);
-                writeln!(spool.ledger, "produced {:x} {} {transitions}", key.0, key.1)?;
+                spool.note(format!("produced {:x} {} {transitions}", key.0, key.1));
             }
             let bytes = fs::metadata(&path)?.len();
             spool.held.insert(key, bytes);
@@ -106,22 +123,38 @@ impl Spool {
         Ok(spool)
     }
 
+    /// The mark of the transitions `stream`'s rollout makes, starting at 0 (see [`MadeMark`]).
+    pub fn made_mark(&self, stream: u64) -> io::Result<MadeMark> {
+        let file = OpenOptions::new().create(true).write(true).truncate(true).open(self.made_path(stream))?;
+        let mut mark = MadeMark { file, made: 0 };
+        mark.write()?;
+        Ok(mark)
+    }
+
     /// Spools `batch` and returns its frame to publish; `None` when it fails the wire checks
-    /// (counted and in the ledger as `dropped invalid`). Drops the oldest batches past the limit.
-    pub fn push(&mut self, batch: &ExperienceBatch) -> io::Result<Option<Vec<u8>>> {
+    /// (counted and in the ledger as `dropped invalid`). A batch whose file cannot be written is
+    /// published all the same, once and unspooled: counted, and in the ledger as `dropped
+    /// spool_write` (the audit finds it stored if the replay server got it). Drops the oldest
+    /// batches past the limit.
+    pub fn push(&mut self, batch: &ExperienceBatch) -> Option<Vec<u8>> {
         let key = (batch.stream, batch.seq);
         let transitions = batch.len() as u64;
         if batch.validate().is_err() {
             self.counts.invalid_batches += 1;
-            writeln!(self.ledger, "dropped invalid {:x} {} {transitions}", key.0, key.1)?;
-            return Ok(None);
+            self.note(format!("dropped invalid {:x} {} {transitions}", key.0, key.1));
+            return None;
         }
         let frame = proto::encode(batch);
         let path = self.path(key);
         let tmp = path.with_extension("tmp");
-        fs::write(&tmp, &frame)?;
-        fs::rename(&tmp, &path)?;
-        writeln!(self.ledger, "produced {:x} {} {transitions}", key.0, key.1)?;
+        if let Err(error) = fs::write(&tmp, &frame).and_then(|()| fs::rename(&tmp, &path)) {
+            tracing::error!(%error, stream = key.0, seq = key.1, "could not spool a batch; sending it unspooled");
+            let _ = fs::remove_file(&tmp);
+            self.counts.write_failed_batches += 1;
+            self.note(format!("dropped spool_write {:x} {} {transitions}", key.0, key.1));
+            return Some(frame);
+        }
+        self.note(format!("produced {:x} {} {transitions}", key.0, key.1));
         self.counts.produced_batches += 1;
         self.counts.produced_transitions += transitions;
         self.hold(key, frame.len() as u64);
@@ -129,11 +162,14 @@ impl Spool {
             let Some((&oldest, _)) = self.held.first_key_value() else { break };
             let frame = fs::read(self.path(oldest)).unwrap_or_default();
             let n = decode(&frame).map_or(0, |b| b.len() as u64);
-            self.release(oldest)?;
+            if let Err(error) = self.release(oldest) {
+                tracing::error!(%error, "could not drop the spool's oldest batch; the spool stays over its limit");
+                break;
+            }
             self.counts.overflow_batches += 1;
-            writeln!(self.ledger, "dropped spool_overflow {:x} {} {n}", oldest.0, oldest.1)?;
+            self.note(format!("dropped spool_overflow {:x} {} {n}", oldest.0, oldest.1));
         }
-        Ok(Some(frame))
+        Some(frame)
     }
 
     /// Releases every held batch of this executor that `marks` says is durable, and finds the
@@ -186,6 +222,32 @@ impl Spool {
         self.dir.join(format!("{stream:016x}-{seq:012x}.batch"))
     }
 
+    fn made_path(&self, stream: u64) -> PathBuf {
+        self.dir.join(format!("{stream:016x}.made"))
+    }
+
+    /// Appends `line` to the ledger, after any a failed write left over; on failure keeps them all
+    /// for the next time (counted meanwhile). After a failure the text starts with a newline, so a
+    /// line written in part ends there and is skipped as malformed.
+    fn note(&mut self, line: String) {
+        let after_failure = !self.backlog.is_empty();
+        self.backlog.push(line);
+        let mut text = String::from(if after_failure { "\n" } else { "" });
+        for line in &self.backlog {
+            text.push_str(line);
+            text.push('\n');
+        }
+        match self.ledger.write_all(text.as_bytes()) {
+            Ok(()) => self.backlog.clear(),
+            Err(error) => {
+                if !after_failure {
+                    tracing::error!(%error, "could not write the spool's ledger; keeping its lines until it can");
+                }
+            }
+        }
+        self.counts.ledger_backlog = self.backlog.len() as u64;
+    }
+
     fn hold(&mut self, key: Key, bytes: u64) {
         if self.held.insert(key, bytes).is_none() {
             self.counts.held_bytes += bytes;
@@ -219,24 +281,73 @@ pub struct LedgerEntry {
     pub transitions: u64,
 }
 
-/// Executor `executor_id`'s ledger under `spool_dir` (empty if it never spooled), and the batches
-/// its spool still holds: what an audit of a run adds up.
-pub fn read_ledger(spool_dir: &Path, executor_id: u32) -> io::Result<(Vec<LedgerEntry>, Vec<Key>)> {
+/// What one executor's spool folder says: what an audit of a run adds up.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Ledger {
+    /// The ledger's lines, in order.
+    pub entries: Vec<LedgerEntry>,
+    /// The batches the spool still holds, sorted.
+    pub held: Vec<Key>,
+    /// Per stream, the transitions its rollout made ([`MadeMark`]).
+    pub made: BTreeMap<u64, u64>,
+}
+
+/// Executor `executor_id`'s ledger under `spool_dir` (empty if it never spooled), the batches its
+/// spool still holds and its streams' made marks.
+pub fn read_ledger(spool_dir: &Path, executor_id: u32) -> io::Result<Ledger> {
     let dir = spool_dir.join(format!("executor-{executor_id}"));
     let text = match fs::read_to_string(dir.join("ledger")) {
         Ok(text) => text,
-        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok((Vec::new(), Vec::new())),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Ledger::default()),
         Err(e) => return Err(e),
     };
-    let entries = text.lines().filter_map(parse_entry).collect();
-    let mut held = Vec::new();
+    let mut ledger = Ledger { entries: text.lines().filter_map(parse_entry).collect(), ..Ledger::default() };
     for entry in fs::read_dir(&dir)? {
-        if let Some(key) = entry?.file_name().to_str().and_then(parse_name) {
-            held.push(key);
+        let entry = entry?;
+        let Some(name) = entry.file_name().to_str().map(str::to_string) else { continue };
+        if let Some(key) = parse_name(&name) {
+            ledger.held.push(key);
+        } else if let Some(stream) = name.strip_suffix(".made") {
+            let (Ok(stream), Ok(text)) = (u64::from_str_radix(stream, 16), fs::read_to_string(entry.path()))
+            else {
+                continue;
+            };
+            if let Ok(made) = text.trim().parse() {
+                ledger.made.insert(stream, made);
+            }
         }
     }
-    held.sort_unstable();
-    Ok((entries, held))
+    ledger.held.sort_unstable();
+    Ok(ledger)
+}
+
+/// The transitions one stream's rollout has made, on disk (`<stream>.made` in the spool's folder):
+/// the rollout thread adds each step's before they can reach a batch, so at any moment, a SIGKILL
+/// included, the mark is at least what the ledger names of the stream, and the difference is what
+/// the process held in memory. Each [`MadeMark::add`] is one small write in place (no fsync: like
+/// the spool, it survives a killed process, not a crashed machine).
+#[derive(Debug)]
+pub struct MadeMark {
+    file: File,
+    made: u64,
+}
+
+impl MadeMark {
+    /// Adds `transitions` just made and writes the new total.
+    pub fn add(&mut self, transitions: u64) -> io::Result<()> {
+        self.made += transitions;
+        self.write()
+    }
+
+    /// The total so far.
+    pub fn made(&self) -> u64 {
+        self.made
+    }
+
+    fn write(&mut self) -> io::Result<()> {
+        // Fixed width: each write covers the last one whole.
+        self.file.write_all_at(format!("{:020}\n", self.made).as_bytes(), 0)
+    }
 }
 
 fn parse_entry(line: &str) -> Option<LedgerEntry> {
@@ -323,7 +434,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let mut spool = Spool::open(dir.path(), 3, 1 << 20).unwrap();
         for seq in 0..4 {
-            let frame = spool.push(&batch(0xab, seq, 5)).unwrap().unwrap();
+            let frame = spool.push(&batch(0xab, seq, 5)).unwrap();
             assert_eq!(decode(&frame).unwrap().seq, seq);
         }
         assert_eq!(spool.on_marks(&marks(0xab, 2)).unwrap().durable, 2);
@@ -386,19 +497,77 @@ mod tests {
         assert_eq!(spool.held(), [(1, 1), (1, 2)], "the oldest went");
         let mut bad = batch(1, 3, 4);
         bad.td_errors[0] = f32::NAN;
-        assert_eq!(spool.push(&bad).unwrap(), None);
+        assert_eq!(spool.push(&bad), None);
         let c = spool.counts();
         assert_eq!((c.produced_batches, c.overflow_batches, c.invalid_batches, c.held_batches), (3, 1, 1, 2));
         assert_eq!(c.held_bytes, 2 * one);
         let lines = ledger(dir.path());
         assert!(lines.contains(&"dropped spool_overflow 1 0 4".to_string()), "{lines:?}");
         assert!(lines.contains(&"dropped invalid 1 3 4".to_string()), "{lines:?}");
-        let (entries, held) = read_ledger(dir.path(), 3).unwrap();
+        let Ledger { entries, held, made } = read_ledger(dir.path(), 3).unwrap();
         assert_eq!(held, [(1, 1), (1, 2)]);
+        assert!(made.is_empty(), "no rollout marked this spool");
         assert_eq!(entries.len(), 5);
         let overflow =
             LedgerEntry { dropped: Some("spool_overflow".into()), stream: 1, seq: 0, transitions: 4 };
         assert!(entries.contains(&overflow));
         assert_eq!(entries.iter().filter(|e| e.dropped.is_none()).count(), 3);
+    }
+
+    #[test]
+    fn a_batch_that_cannot_be_spooled_is_sent_counted_and_in_the_ledger() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut spool = Spool::open(dir.path(), 3, 1 << 20).unwrap();
+        spool.push(&batch(7, 0, 2)).unwrap();
+        // The next batch's file cannot be written: a folder stands where it goes.
+        let sub = dir.path().join("executor-3");
+        fs::create_dir(sub.join(format!("{:016x}-{:012x}.tmp", 7, 1))).unwrap();
+        let frame = spool.push(&batch(7, 1, 3)).expect("sent all the same, unspooled");
+        assert_eq!(decode(&frame).unwrap(), batch(7, 1, 3));
+        spool.push(&batch(7, 2, 4)).unwrap();
+        let c = spool.counts();
+        assert_eq!((c.produced_batches, c.write_failed_batches, c.held_batches), (2, 1, 2));
+        assert_eq!(spool.held(), [(7, 0), (7, 2)], "not held: nothing to re-send");
+        assert_eq!(ledger(dir.path()), ["produced 7 0 2", "dropped spool_write 7 1 3", "produced 7 2 4"]);
+    }
+
+    #[test]
+    fn ledger_lines_a_failed_write_left_are_written_with_the_next_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut spool = Spool::open(dir.path(), 3, 1 << 20).unwrap();
+        spool.push(&batch(7, 0, 2)).unwrap();
+        // The ledger's disk fails (a read-only handle stands in for it), then recovers.
+        let path = dir.path().join("executor-3/ledger");
+        let writable = std::mem::replace(&mut spool.ledger, File::open(&path).unwrap());
+        spool.push(&batch(7, 1, 3)).unwrap();
+        assert_eq!(spool.counts().ledger_backlog, 1);
+        spool.ledger = writable;
+        spool.push(&batch(7, 2, 4)).unwrap();
+        assert_eq!(spool.counts().ledger_backlog, 0);
+        let lines = ledger(dir.path());
+        assert_eq!(lines, ["produced 7 0 2", "", "produced 7 1 3", "produced 7 2 4"]);
+        assert_eq!(read_ledger(dir.path(), 3).unwrap().entries.len(), 3);
+    }
+
+    #[test]
+    fn made_marks_hold_each_streams_total_and_are_read_with_the_ledger() {
+        let dir = tempfile::tempdir().unwrap();
+        let spool = Spool::open(dir.path(), 3, 1 << 20).unwrap();
+        let mut mark = spool.made_mark(0xab).unwrap();
+        assert_eq!(read_ledger(dir.path(), 3).unwrap().made, BTreeMap::from([(0xab, 0)]));
+        for n in [5, 0, 1_000_000_007, 3] {
+            mark.add(n).unwrap();
+        }
+        assert_eq!(mark.made(), 1_000_000_015);
+        let mut other = spool.made_mark(0xcd).unwrap();
+        other.add(2).unwrap();
+        let read = read_ledger(dir.path(), 3).unwrap();
+        assert_eq!(read.made, BTreeMap::from([(0xab, 1_000_000_015), (0xcd, 2)]));
+        assert!(read.held.is_empty() && read.entries.is_empty());
+        // A new process keeps the earlier marks: they are the account of the earlier streams.
+        drop(spool);
+        let spool = Spool::open(dir.path(), 3, 1 << 20).unwrap();
+        assert!(spool.held().is_empty());
+        assert_eq!(read_ledger(dir.path(), 3).unwrap().made.len(), 2);
     }
 }

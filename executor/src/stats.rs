@@ -49,6 +49,8 @@ pub(crate) fn report(
             ("resent_batches", c.resent_batches),
             ("overflow_batches", c.overflow_batches),
             ("invalid_batches", c.invalid_batches),
+            ("write_failed_batches", c.write_failed_batches),
+            ("ledger_backlog", c.ledger_backlog),
         ];
         for (name, value) in figures {
             r.push_metric(format!("executor/spool_{name}"), value as f64);

@@ -11,6 +11,7 @@ use tokio::sync::{mpsc, watch};
 use crate::ExecutorSettings;
 use crate::inbox::Inbox;
 use crate::rollout::Rollout;
+use crate::spool::MadeMark;
 
 /// Why the rollout is not stepping.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -161,6 +162,10 @@ pub struct WorkerReport {
     pub blocked_ms_total: u64,
     /// Largest `env_steps − allowance` seen after any step; never positive when the barrier holds.
     pub max_over_allowance: i64,
+    /// Transitions made (that joined the pending batch), all published by the time it stops.
+    pub transitions: u64,
+    /// Steps whose transitions could not be added to the spool's made mark (its disk failed).
+    pub made_mark_failed: u64,
 }
 
 struct Worker {
@@ -171,6 +176,8 @@ struct Worker {
     /// Env steps covered by the last batch handed over (deterministic mode's block-end marker).
     sent_through: u64,
     rollout: Rollout,
+    /// Durable experience: the transitions made, marked on disk before they can reach a batch.
+    made: Option<MadeMark>,
     inbox: Arc<Inbox>,
     out: mpsc::Sender<Out>,
     settings: ExecutorSettings,
@@ -197,7 +204,8 @@ pub struct Lockstep {
     pub staged: Option<ParamSnapshot>,
 }
 
-/// Runs the rollout until the inbox says stop (or the shell goes away); errors end it early.
+/// Runs the rollout until the inbox says stop (or the shell goes away); errors end it early. With
+/// `made`, every step's new transitions are added to it before they can reach a batch.
 pub fn run(
     id: u32,
     rollout: Rollout,
@@ -205,12 +213,14 @@ pub fn run(
     out: mpsc::Sender<Out>,
     settings: ExecutorSettings,
     lockstep: Option<Lockstep>,
+    made: Option<MadeMark>,
 ) -> anyhow::Result<WorkerReport> {
     let mut w = Worker {
         id,
         lockstep,
         sent_through: 0,
         rollout,
+        made,
         inbox,
         out,
         settings,
@@ -382,7 +392,9 @@ impl Worker {
         if cut.is_some() {
             self.rollout.truncate_next_step();
         }
+        let pending = self.rollout.pending();
         let outcome = self.rollout.step()?;
+        self.mark_made(self.rollout.pending().saturating_sub(pending) as u64);
         let over = self.rollout.env_steps() as i64 - self.allowed as i64;
         self.report.max_over_allowance = self.report.max_over_allowance.max(over);
         if outcome.dropped_non_finite {
@@ -415,6 +427,20 @@ impl Worker {
             }
         }
         Ok(())
+    }
+
+    /// Counts `transitions` just made, on disk first when durable (before any can reach a batch). A
+    /// failed mark is counted and logged once; the audit then finds the stream's ledger past its
+    /// mark and says so.
+    fn mark_made(&mut self, transitions: u64) {
+        self.report.transitions += transitions;
+        let Some(made) = self.made.as_mut().filter(|_| transitions > 0) else { return };
+        if let Err(error) = made.add(transitions) {
+            if self.report.made_mark_failed == 0 {
+                tracing::error!(%error, "could not mark the transitions made in the spool");
+            }
+            self.report.made_mark_failed += 1;
+        }
     }
 
     /// Publishes every pending transition, in batches of at most `batch_transitions`.
@@ -528,7 +554,7 @@ mod tests {
             ExecutorSettings { batch_transitions: 4, report_interval_ms: 10, ..ExecutorSettings::default() };
         let worker = {
             let inbox = inbox.clone();
-            std::thread::spawn(move || run(0, rollout, inbox, tx, settings, None))
+            std::thread::spawn(move || run(0, rollout, inbox, tx, settings, None, made))
         };
         Running { cfg, inbox, rx, worker }
     }
@@ -582,5 +608,31 @@ mod tests {
         inbox.stop();
         let report = worker.join().unwrap().unwrap();
         assert_eq!((report.weights_loads, report.weights_unloadable, report.env_steps), (1, 2, 9));
+    }
+
+    #[test]
+    fn every_transition_made_is_marked_before_it_is_sent() {
+        let dir = tempfile::tempdir().unwrap();
+        let spool = crate::Spool::open(dir.path(), 0, 1 << 20).unwrap();
+        let Running { cfg, inbox, mut rx, worker } = start_marking(Some(spool.made_mark(9).unwrap()));
+        let made = || crate::read_ledger(dir.path(), 0).unwrap().made[&9];
+        inbox.set_step(step(10, 5));
+        inbox.set_weights(Learner::new(cfg, 1).unwrap().snapshot().unwrap());
+        let (_, sent) = until(&mut rx, |r| r.blocked && r.env_steps == 5);
+        assert_eq!((sent, made()), (5, 5));
+        // Mid-run, whatever has been sent is marked already; the rest is in memory.
+        inbox.set_step(step(200, 5));
+        let (_, sent) = until(&mut rx, |r| r.env_steps >= 100);
+        assert!(made() >= 5 + sent, "{} made, {} sent", made(), 5 + sent);
+        inbox.stop();
+        let mut rest = 0;
+        while let Some(out) = rx.blocking_recv() {
+            if let Out::Experience(b) = out {
+                rest += b.len() as u64;
+            }
+        }
+        let report = worker.join().unwrap().unwrap();
+        assert_eq!(report.transitions, 5 + sent + rest, "every transition made was sent");
+        assert_eq!((made(), report.made_mark_failed), (report.transitions, 0));
     }
 }
