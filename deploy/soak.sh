@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # A fault soak: the distributed run with durable experience (local.sh DURABLE=1, every role
 # supervised), while roles are killed with SIGKILL at random times from a seeded schedule; at the
-# end one summary: experience produced, stored, dropped by reason, pending and lost (must be 0),
+# end one summary: experience produced, stored, refused, dropped by reason, pending, lost at a
+# kill (in a killed executor's memory, counted by its made marks) and unexplained (must be 0),
 # restarts per role, the learner's step around each of its kills (never back past its last
 # checkpoint), the longest wait any role logged, whether the learner still updates, exit status.
 #
@@ -11,7 +12,8 @@
 # every KILL_EVERY_S/2 .. 3*KILL_EVERY_S/2 seconds, default 40), WAIT_DEADLINE_S (a logged wait
 # longer than this fails the soak, default 120), RUN_ID (default soak-<time>), BUILD=0 (skip the
 # build). No kills in the last two minutes: the run must show that it recovered. Exits non-zero if
-# anything was lost, a wait passed its deadline, the learner stopped updating or local.sh failed.
+# the experience audit found anything unexplained, a wait passed its deadline, the learner stopped
+# updating or local.sh failed.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 

@@ -3,8 +3,9 @@
 
     soak_summary.py RUN_DIR LOCAL_STATUS AUDIT_STATUS WAIT_DEADLINE_S AUDIT_TEXT
 
-Exits 1 if anything was lost, a logged wait passed WAIT_DEADLINE_S, the learner was not updating
-in the last minute, a learner resumed behind its last checkpoint, or local.sh failed.
+Exits 1 if the experience audit found a difference nothing explains, a logged wait passed
+WAIT_DEADLINE_S, the learner was not updating in the last minute, a learner resumed behind its last
+checkpoint, or local.sh failed.
 """
 import json
 import pathlib
@@ -65,7 +66,7 @@ def main():
     if not updating:
         failed.append("the learner did not update in the last minute")
     if audit_status != 0:
-        failed.append("transitions were lost (or the audit failed)")
+        failed.append("the experience audit found unexplained transitions (or could not run)")
     if local_status != 0:
         failed.append(f"local.sh exited with status {local_status}")
 
