@@ -162,12 +162,14 @@ impl Spool {
             let Some((&oldest, _)) = self.held.first_key_value() else { break };
             let frame = fs::read(self.path(oldest)).unwrap_or_default();
             let n = decode(&frame).map_or(0, |b| b.len() as u64);
+            // Its line first: a process killed in between leaves a batch the ledger calls dropped
+            // and its next start sends again (stored, the audit says), never one gone unnamed.
+            self.counts.overflow_batches += 1;
+            self.note(format!("dropped spool_overflow {:x} {} {n}", oldest.0, oldest.1));
             if let Err(error) = self.release(oldest) {
                 tracing::error!(%error, "could not drop the spool's oldest batch; the spool stays over its limit");
                 break;
             }
-            self.counts.overflow_batches += 1;
-            self.note(format!("dropped spool_overflow {:x} {} {n}", oldest.0, oldest.1));
         }
         Some(frame)
     }
