@@ -3,6 +3,9 @@
 //! turns the pending transitions into an [`ExperienceBatch`] with each transition's initial
 //! priority |δ| from the local critics (Ape-X; the same formula the learner's updates use). With
 //! `[agent] n_step` > 1 the stored transitions are n-step ones ([`NStepReturns`]).
+//!
+//! The single-machine trainer (`sac-lsp train`) steps the same rollout and takes the pending
+//! transitions ([`Rollout::take_pending`]) into its own replay, so both store the same transitions.
 
 use agent::{Actor, Batch, Mode, NStepReturns, ParamSnapshot, StepEnd};
 use proto::{EpisodeReport, ExperienceBatch, Transition, Transitions};
@@ -139,6 +142,17 @@ impl Rollout {
     /// Transitions waiting to be published.
     pub fn pending(&self) -> usize {
         self.pending.len()
+    }
+
+    /// Takes every pending transition, oldest first, without initial priorities: for a caller that
+    /// stores them itself (the single-machine trainer's replay gives new ones the maximum).
+    pub fn take_pending(&mut self) -> Transitions {
+        self.pending.split_front(usize::MAX)
+    }
+
+    /// The acting policy (the single-machine trainer evaluates with it between steps).
+    pub fn actor_mut(&mut self) -> &mut Actor {
+        &mut self.actor
     }
 
     /// The loaded weights' version, `None` before the first load.
@@ -292,7 +306,7 @@ mod tests {
     }
 
     fn rollout_with(n_step: usize) -> (Rollout, Learner) {
-        let env = Task::InvertedPendulum.make(3).unwrap();
+        let env = sim::make(Task::InvertedPendulum, 3).unwrap();
         let cfg = AgentConfig {
             critic_hidden: vec![8],
             embedding_layers: vec![8, 2],
@@ -380,7 +394,7 @@ mod her_tests {
     fn episodes_end_with_k_relabelled_copies_published_in_bounded_batches() {
         let her = HerConfig { goal: GoalKind::Speed, reward: GoalReward::Binary, ..HerConfig::default() };
         let task = Task::InvertedPendulum;
-        let env = her.make(task, 3).unwrap();
+        let env = sim::her::make(&her, task, 3).unwrap();
         let cfg = AgentConfig {
             critic_hidden: vec![8],
             embedding_layers: vec![8, 2],
@@ -389,7 +403,7 @@ mod her_tests {
         assert_eq!(cfg.obs_dim, 6);
         let mut actor = Actor::new(cfg.clone(), 2).unwrap();
         actor.load(&Learner::new(cfg, 1).unwrap().snapshot().unwrap()).unwrap();
-        let mut r = Rollout::new(7, env, actor, 3).with_hindsight(her.hindsight(task, 4));
+        let mut r = Rollout::new(7, env, actor, 3).with_hindsight(sim::her::hindsight(&her, task, 4));
         let mut finished = 0;
         for _ in 0..200 {
             if let Some(ep) = r.step().unwrap().episode {
