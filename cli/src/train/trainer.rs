@@ -5,13 +5,13 @@
 
 use std::time::Instant;
 
-use agent::{Actor, AnyLearner, Batch, Mode, NStepReturns, PolicyStack, StepEnd};
+use agent::{Actor, AnyLearner, Batch, PolicyStack};
 use anyhow::{Context, Result};
+use executor::Rollout;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use replay::{ReplayBuffer, SampledBatch, SamplingMode, TransitionBatch};
 use sim::Environment;
-use sim::her::Hindsight;
 
 use learner::LossMeans;
 
@@ -20,24 +20,18 @@ use super::run_config::RunConfig;
 
 pub use learner::Evaluation;
 
-/// A single-machine SAC-LSP run: environment, replay, learner and the acting policy.
+/// A single-machine SAC-LSP run: the rollout (environment and acting policy), replay and learner.
 pub struct Trainer {
     config: RunConfig,
-    env: Box<dyn Environment>,
+    /// The executors' rollout: acts, stores goal rewards and relabelled copies with HER, builds the
+    /// n-step transitions, drops non-finite steps and cuts episodes at the task's limit.
+    rollout: Rollout,
     eval_env: Box<dyn Environment>,
     learner: AnyLearner,
-    actor: Actor,
     /// The frozen levels the actor acts through (empty for one level), embedded in checkpoints.
     frozen: PolicyStack,
     replay: ReplayBuffer,
-    /// Builds the stored transitions (n-step ones with `[agent] n_step` > 1).
-    n_step: NStepReturns,
-    /// With HER (`[her]`): the stored goal reward and each episode's relabelled copies.
-    hindsight: Option<Hindsight>,
     rng: StdRng,
-    observation: Vec<f32>,
-    episode_return: f64,
-    env_steps: u64,
     updates: u64,
     epoch: u64,
     sampled: SampledBatch,
@@ -47,22 +41,24 @@ pub struct Trainer {
 
 impl std::fmt::Debug for Trainer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Trainer").field("epoch", &self.epoch).field("env_steps", &self.env_steps).finish()
+        f.debug_struct("Trainer").field("epoch", &self.epoch).field("rollout", &self.rollout).finish()
     }
-}
-
-fn to_f32(values: &[f64]) -> Vec<f32> {
-    values.iter().map(|v| *v as f32).collect()
 }
 
 impl Trainer {
     /// Builds the run. Seeds: networks `seed`, acting noise `seed + 1`, resets `seed + 2` (training)
-    /// and `seed + 3` (evaluation), replay sampling `seed + 4`.
+    /// and `seed + 3` (evaluation), replay sampling `seed + 4`, relabelling `seed + 5`.
     pub fn new(config: RunConfig) -> Result<Self> {
+        let task = config.train.task().map_err(anyhow::Error::msg)?;
+        let env = sim::her::make(&config.her, task, config.train.seed + 2)?;
+        Self::on(config, env)
+    }
+
+    /// [`new`](Self::new) training on `env` (the task's, or a test's stand-in for it).
+    fn on(config: RunConfig, env: Box<dyn Environment>) -> Result<Self> {
         let seed = config.train.seed;
         let task = config.train.task().map_err(anyhow::Error::msg)?;
-        let mut env = config.her.make(task, seed + 2)?;
-        let eval_env = config.her.make(task, seed + 3)?;
+        let eval_env = sim::her::make(&config.her, task, seed + 3)?;
         let learner = AnyLearner::new(config.agent.clone(), seed, config.train.backend)?;
         tracing::info!(backend = ?learner.backend(), "learner");
         let levels = config.hierarchy.read().map_err(anyhow::Error::msg)?;
@@ -71,23 +67,16 @@ impl Trainer {
             Actor::with_stack(config.agent.clone(), PolicyStack::from_weights(&levels)?, seed + 1)?;
         actor.load(&learner.snapshot()?)?;
         let replay = ReplayBuffer::new(config.replay.clone(), config.dims())?;
-        let observation = to_f32(&env.reset(Some(seed + 2)));
-        let n_step = NStepReturns::for_config(&config.agent);
-        let hindsight = config.her.hindsight(task, seed + 5);
+        let hindsight = sim::her::hindsight(&config.her, task, seed + 5);
+        let rollout = Rollout::new(0, env, actor, seed + 2).with_hindsight(hindsight);
         Ok(Self {
             config,
-            env,
+            rollout,
             eval_env,
             learner,
-            actor,
             frozen,
             replay,
-            n_step,
-            hindsight,
             rng: StdRng::seed_from_u64(seed + 4),
-            observation,
-            episode_return: 0.0,
-            env_steps: 0,
             updates: 0,
             epoch: 0,
             sampled: SampledBatch::new(),
@@ -115,7 +104,7 @@ impl Trainer {
     /// Runs one epoch of `epoch_length` env steps and its evaluation.
     pub fn run_epoch(&mut self) -> Result<EpochRecord> {
         let epoch_start = Instant::now();
-        let (steps_before, updates_before) = (self.env_steps, self.updates);
+        let (steps_before, updates_before) = (self.rollout.env_steps(), self.updates);
         let mut losses = LossMeans::default();
         let mut finished_returns = Vec::new();
         for _ in 0..self.config.train.epoch_length {
@@ -127,22 +116,23 @@ impl Trainer {
                     losses.add(&self.update()?);
                 }
             }
-            if self.env_steps.is_multiple_of(self.config.train.sync_actor_every_steps) {
-                self.actor.load(&self.learner.snapshot()?)?;
+            if self.rollout.env_steps().is_multiple_of(self.config.train.sync_actor_every_steps) {
+                self.rollout.load(&self.learner.snapshot()?)?;
             }
         }
         let seconds = epoch_start.elapsed().as_secs_f64();
         let evaluation = self.evaluate(self.config.train.eval_episodes)?;
+        let env_steps = self.rollout.env_steps();
         let mut record = EpochRecord {
             epoch: self.epoch,
-            env_steps: self.env_steps,
+            env_steps,
             updates: self.updates,
             wall_s: self.started.elapsed().as_secs_f64(),
             eval_return: evaluation.mean_return,
             eval_length: evaluation.mean_length,
             train_return: mean(&finished_returns),
             updates_per_s: (self.updates - updates_before) as f64 / seconds,
-            env_steps_per_s: (self.env_steps - steps_before) as f64 / seconds,
+            env_steps_per_s: (env_steps - steps_before) as f64 / seconds,
             ..EpochRecord::default()
         };
         record.fill_losses(&losses);
@@ -150,67 +140,27 @@ impl Trainer {
         Ok(record)
     }
 
-    /// One env step with the stochastic policy; stores the transition. Returns the episode's return
+    /// One env step of the rollout; its transitions go to the replay. Returns the episode's return
     /// when the step ended an episode (terminated or truncated).
     fn env_step(&mut self) -> Result<Option<f64>> {
-        let act = self.actor.act(&self.observation, Mode::Explore)?;
-        let action = self.env.spec().action_from_unit(&act.env_action);
-        let step = self.env.step(&action)?;
-        let next_observation = to_f32(&step.observation);
-        // With HER the stored reward is the goal reward; the episode's return stays the task's own.
-        let reward = match (&self.hindsight, &step.goal) {
-            (Some(h), Some(status)) => h.reward(step.reward, status) as f32,
-            _ => step.reward as f32,
-        };
-        // Only a true termination stops bootstrapping; the time limit does not.
-        let end = StepEnd { terminated: step.terminated, truncated: step.truncated };
-        let replay = &mut self.replay;
-        self.n_step
-            .push(&self.observation, &act.action, reward, &next_observation, end, |t| {
-                replay
-                    .insert_batch(TransitionBatch {
-                        observations: t.observation,
-                        actions: t.action,
-                        rewards: &[t.reward],
-                        next_observations: t.next_observation,
-                        terminated: &[t.terminated],
-                        abs_td_errors: None,
-                    })
-                    .map(drop)
-            })
-            .context("storing a transition")?;
-        self.env_steps += 1;
-        self.episode_return += step.reward;
-        if let (Some(h), Some(status)) = (&mut self.hindsight, &step.goal) {
-            h.record(&self.observation, &act.action, step.reward, &next_observation, step.terminated, status);
+        let outcome = self.rollout.step()?;
+        if outcome.dropped_non_finite {
+            tracing::warn!("non-finite observation or reward: transition dropped, episode reset");
         }
-        if step.terminated || step.truncated {
-            if let Some(h) = &mut self.hindsight {
-                let mut stored = Ok(());
-                h.finish_episode(|t| {
-                    if stored.is_ok() {
-                        stored = replay
-                            .insert_batch(TransitionBatch {
-                                observations: &t.observation,
-                                actions: &t.action,
-                                rewards: &[t.reward],
-                                next_observations: &t.next_observation,
-                                terminated: &[t.terminated],
-                                abs_td_errors: None,
-                            })
-                            .map(drop);
-                    }
-                });
-                stored.context("storing a relabelled transition")?;
-            }
-            let finished = self.episode_return;
-            self.episode_return = 0.0;
-            self.observation = to_f32(&self.env.reset(None));
-            Ok(Some(finished))
-        } else {
-            self.observation = next_observation;
-            Ok(None)
+        let t = self.rollout.take_pending();
+        if !t.is_empty() {
+            self.replay
+                .insert_batch(TransitionBatch {
+                    observations: &t.observations,
+                    actions: &t.actions,
+                    rewards: &t.rewards,
+                    next_observations: &t.next_observations,
+                    terminated: &t.terminated,
+                    abs_td_errors: None,
+                })
+                .context("storing transitions")?;
         }
+        Ok(outcome.episode.map(|e| e.episode_return))
     }
 
     /// One gradient update from a replay batch; prioritized replay gets the batch's new |δ|.
@@ -245,8 +195,9 @@ impl Trainer {
     /// Runs `episodes` episodes in deterministic mode on the evaluation env, with the learner's
     /// current weights: the distributed learner's evaluation, the same function.
     pub fn evaluate(&mut self, episodes: u32) -> Result<Evaluation> {
-        self.actor.load(&self.learner.snapshot()?)?;
-        learner::evaluate(&mut self.actor, self.eval_env.as_mut(), episodes, self.config.train.eval_mode)
+        self.rollout.load(&self.learner.snapshot()?)?;
+        let actor = self.rollout.actor_mut();
+        learner::evaluate(actor, self.eval_env.as_mut(), episodes, self.config.train.eval_mode)
     }
 }
 
@@ -323,6 +274,57 @@ mod tests {
         bad.her = HerConfig { goal: GoalKind::Speed, ..HerConfig::default() };
         bad.agent.n_step = 3;
         assert!(bad.fitted().unwrap_err().to_string().contains("n_step"));
+    }
+
+    /// The pendulum with a shorter time limit in its spec (the env itself does not truncate there),
+    /// whose every `nan_every`-th step reports a NaN observation.
+    struct Blowup {
+        inner: Box<dyn Environment>,
+        spec: sim::EnvSpec,
+        nan_every: u64,
+        steps: u64,
+    }
+
+    impl Environment for Blowup {
+        fn spec(&self) -> &sim::EnvSpec {
+            &self.spec
+        }
+
+        fn reset(&mut self, seed: Option<u64>) -> Vec<f64> {
+            self.inner.reset(seed)
+        }
+
+        fn reset_to(&mut self, state: &sim::InitState) -> Result<Vec<f64>, sim::EnvError> {
+            self.inner.reset_to(state)
+        }
+
+        fn step(&mut self, action: &[f64]) -> Result<sim::Step, sim::EnvError> {
+            let mut step = self.inner.step(action)?;
+            self.steps += 1;
+            if self.steps.is_multiple_of(self.nan_every) {
+                step.observation[0] = f64::NAN;
+            }
+            Ok(step)
+        }
+    }
+
+    #[test]
+    fn non_finite_steps_are_dropped_and_episodes_cut_at_the_limit() {
+        let config = tiny(SamplingMode::Uniform);
+        let inner = sim::make(sim::Task::InvertedPendulum, config.train.seed + 2).unwrap();
+        let spec = sim::EnvSpec { max_episode_steps: 3, ..inner.spec().clone() };
+        let env = Blowup { inner, spec, nan_every: 50, steps: 0 };
+        let mut trainer = Trainer::on(config, Box::new(env)).unwrap();
+        let record = trainer.run_epoch().unwrap();
+        // Steps 50, 100, ..., 300 are dropped: they count as env steps but store nothing, so the
+        // replay reaches 100 transitions at step 102 and updates run from there.
+        assert_eq!((record.env_steps, record.updates), (300, 199));
+        assert_eq!(trainer.replay().len(), 294);
+        // The pendulum pays 1 per step up: no episode's return is above 3, and 100 more steps
+        // (two of them dropped) end some 30 episodes.
+        assert!(record.train_return <= 3.0, "{}", record.train_return);
+        let returns: Vec<f64> = (0..100).filter_map(|_| trainer.env_step().unwrap()).collect();
+        assert!(returns.len() >= 30 && returns.iter().all(|r| *r <= 3.0), "{returns:?}");
     }
 
     #[test]
