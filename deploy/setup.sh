@@ -2,8 +2,32 @@
 # Fetch MuJoCo 3.17.0's shared library from PyPI's `mujoco==3.17.0` wheel into third_party/mujoco/
 # (git-ignored). mujoco-rs links it through MUJOCO_DYNAMIC_LINK_DIR (.cargo/config.toml) and every
 # binary finds it at run time through an rpath (build.rs), so nobody sets LD_LIBRARY_PATH.
-# Idempotent: returns at once when the library is already there.
+# Also ffmpeg, which `sac-lsp render` encodes .mp4 videos with (a .gif needs nothing) and without which
+# their test skips: installed once with apt-get when run as root where there is one (CI), else a note.
+# Idempotent: returns at once when the library and ffmpeg are already there.
 set -euo pipefail
+
+# Quiet: one line while it installs, apt's output only when it fails; never fails the set-up.
+if ! command -v ffmpeg >/dev/null 2>&1; then
+    if [[ $(id -u) == 0 ]] && command -v apt-get >/dev/null 2>&1; then
+        echo "setup: installing ffmpeg (apt-get) for sac-lsp render's .mp4 videos" >&2
+        apt_log="$(mktemp)"
+        started=$SECONDS
+        export DEBIAN_FRONTEND=noninteractive
+        install_ffmpeg() { apt-get install -y -q --no-install-recommends ffmpeg >>"$apt_log" 2>&1; }
+        # A fresh machine may have no package lists yet, or stale ones: then update and try again.
+        if install_ffmpeg || { apt-get update -q >>"$apt_log" 2>&1 && install_ffmpeg; }; then
+            echo "setup: ffmpeg installed in $((SECONDS - started)) s" >&2
+        else
+            tail -n 20 "$apt_log" >&2
+            echo "setup: could not install ffmpeg (above): .mp4 videos and their test are skipped" >&2
+        fi
+        rm -f "$apt_log"
+    else
+        echo "setup: no ffmpeg on PATH: sac-lsp render writes .gif only and its .mp4 test is skipped" \
+            "(install it as root: apt-get install ffmpeg)" >&2
+    fi
+fi
 
 MUJOCO_VERSION=3.17.0
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

@@ -72,9 +72,21 @@ impl Format {
     }
 }
 
+/// The program that encodes `.mp4` videos, looked up on PATH.
+const FFMPEG: &str = "ffmpeg";
+
 /// Runs `sac-lsp render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
+    run_with(args, FFMPEG)
+}
+
+/// [`run`], encoding an `.mp4` with `ffmpeg` (the tests name one that is missing).
+fn run_with(args: &RenderArgs, ffmpeg: &str) -> Result<()> {
     let format = Format::of(&args.out)?;
+    if format == Format::Mp4 {
+        // Before the policy is loaded or a frame drawn, which can take minutes.
+        check_ffmpeg(ffmpeg).with_context(|| format!("--out {}", args.out.display()))?;
+    }
     let Loaded { task, her, policy } = args.policy.load()?;
     let seed = args.policy.seed;
     let mut env = sim::her::make(&her, task, seed)?;
@@ -128,7 +140,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     progress.finish();
     let video = match format {
         Format::Gif => gif(&frames, frame_s)?,
-        Format::Mp4 => mp4(&frames, frame_s)?,
+        Format::Mp4 => mp4(ffmpeg, &frames, frame_s)?,
     };
     node::durable::write(&args.out, &video)?;
     eprintln!(
@@ -165,28 +177,62 @@ fn gif(frames: &[Image], frame_s: f64) -> Result<Vec<u8>> {
     Ok(out)
 }
 
-/// An H.264 MP4 made by piping raw frames through ffmpeg.
-fn mp4(frames: &[Image], frame_s: f64) -> Result<Vec<u8>> {
+/// Fails, saying what to do, unless `ffmpeg` runs and has the H.264 encoder [`mp4`] uses.
+fn check_ffmpeg(ffmpeg: &str) -> Result<()> {
+    let encoders = match Command::new(ffmpeg)
+        .args(["-hide_banner", "-loglevel", "error", "-encoders"])
+        .stdin(Stdio::null())
+        .output()
+    {
+        Ok(output) => output,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
+            "an .mp4 is encoded by {ffmpeg}, which is not on PATH: install it (Debian: apt-get install \
+             ffmpeg, which deploy/setup.sh runs as root) or write a .gif, which needs nothing else"
+        ),
+        Err(e) => bail!("an .mp4 is encoded by {ffmpeg}, which did not run ({e}); or write a .gif"),
+    };
+    if !encoders.status.success() {
+        bail!(
+            "`{ffmpeg} -encoders` failed ({}): {}; an .mp4 needs a working ffmpeg, or write a .gif",
+            encoders.status,
+            String::from_utf8_lossy(&encoders.stderr).trim()
+        );
+    }
+    if !String::from_utf8_lossy(&encoders.stdout).contains(" libx264 ") {
+        bail!(
+            "{ffmpeg} has no libx264 (H.264) encoder, which an .mp4 needs: install an ffmpeg built with it \
+             (Debian's is) or write a .gif"
+        );
+    }
+    Ok(())
+}
+
+/// An H.264 MP4 made by piping raw frames through `ffmpeg` (odd sizes padded by a pixel).
+fn mp4(ffmpeg: &str, frames: &[Image], frame_s: f64) -> Result<Vec<u8>> {
     let first = frames.first().context("no frames")?;
     let dir = tempfile::tempdir()?;
-    let path = dir.path().join("video.mp4");
-    let mut child = Command::new("ffmpeg")
+    let (path, log) = (dir.path().join("video.mp4"), dir.path().join("ffmpeg.log"));
+    // Its messages go to a file, not a pipe nobody reads while the frames are written.
+    let mut child = Command::new(ffmpeg)
         .args(["-loglevel", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24"])
         .args(["-s", &format!("{}x{}", first.width, first.height)])
         .args(["-r", &format!("{}", 1.0 / frame_s), "-i", "-"])
         .args(["-c:v", "libx264", "-pix_fmt", "yuv420p", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2"])
         .arg(&path)
         .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&log).context("ffmpeg's log file")?)
         .spawn()
-        .map_err(|e| anyhow!("an .mp4 needs ffmpeg on PATH ({e}); write a .gif instead"))?;
+        .with_context(|| format!("running {ffmpeg}"))?;
     let mut stdin = child.stdin.take().context("ffmpeg's stdin")?;
-    for image in frames {
-        stdin.write_all(&image.rgb).context("writing frames to ffmpeg")?;
-    }
+    // A write fails when ffmpeg has stopped; its log then says why.
+    let written = frames.iter().try_for_each(|image| stdin.write_all(&image.rgb));
     drop(stdin);
-    let status = child.wait()?;
-    if !status.success() {
-        bail!("ffmpeg failed ({status})");
+    let status = child.wait().with_context(|| format!("waiting for {ffmpeg}"))?;
+    if !status.success() || written.is_err() {
+        let log = std::fs::read_to_string(&log).unwrap_or_default();
+        let frames = written.err().map(|e| format!(", taking the frames: {e}")).unwrap_or_default();
+        bail!("{ffmpeg} failed ({status}{frames}): {}", log.trim());
     }
     std::fs::read(&path).with_context(|| format!("reading ffmpeg's {}", path.display()))
 }
@@ -232,5 +278,61 @@ mod tests {
 
         let bad = RenderArgs { out: dir.join("pendulum.avi"), ..args };
         assert!(run(&bad).unwrap_err().to_string().contains(".gif or .mp4"));
+    }
+
+    /// Options of a short pendulum video into `out`, `width` × 32 pixels.
+    fn short(checkpoint: &Path, out: PathBuf, width: u32) -> RenderArgs {
+        RenderArgs {
+            policy: policy_args(checkpoint, Latent::Zero),
+            out,
+            still: None,
+            episodes: 2,
+            steps: 5,
+            every: 2,
+            width,
+            height: 32,
+            distance: 3.0,
+            azimuth: 90.0,
+            elevation: -10.0,
+        }
+    }
+
+    #[test]
+    fn an_mp4_without_ffmpeg_fails_at_once_saying_why() {
+        let dir = tempfile::tempdir().unwrap();
+        // No checkpoint either: the check comes before anything is loaded or drawn.
+        let args = short(&dir.path().join("missing.safetensors"), dir.path().join("ant.mp4"), 48);
+        let err = format!("{:#}", run_with(&args, "sac-lsp-test-no-such-ffmpeg").unwrap_err());
+        assert!(err.contains("ant.mp4"), "{err}");
+        assert!(err.contains("sac-lsp-test-no-such-ffmpeg, which is not on PATH"), "{err}");
+        assert!(err.contains("apt-get install ffmpeg") && err.contains("write a .gif"), "{err}");
+        assert!(!args.out.exists());
+    }
+
+    #[test]
+    fn renders_a_policy_to_an_mp4_with_ffmpeg() {
+        if let Err(e) = Command::new(FFMPEG).arg("-version").stdout(Stdio::null()).status() {
+            // Written past the test harness's capture, so that a run without ffmpeg shows it.
+            let _ = writeln!(std::io::stderr(), "skipped: ffmpeg not found ({e}); the .mp4 path is untested");
+            return;
+        }
+        let path = checkpoint("render-mp4", false);
+        // An odd width, which H.264's 4:2:0 pictures cannot have: ffmpeg pads it to 48.
+        let args = short(&path, path.parent().unwrap().join("pendulum.mp4"), 47);
+        run(&args).unwrap();
+        let video = std::fs::read(&args.out).unwrap();
+        assert_eq!(&video[4..8], b"ftyp", "an MP4 starts with its ftyp box");
+        // Decoded back to RGB: whole 48 × 32 frames, as many as were drawn.
+        let decoded = Command::new(FFMPEG)
+            .args(["-loglevel", "error", "-i"])
+            .arg(&args.out)
+            .args(["-f", "rawvideo", "-pix_fmt", "rgb24", "-"])
+            .output()
+            .unwrap();
+        assert!(decoded.status.success(), "{}", String::from_utf8_lossy(&decoded.stderr));
+        let frame_bytes = 48 * 32 * 3;
+        assert_eq!(decoded.stdout.len() % frame_bytes, 0, "{} bytes", decoded.stdout.len());
+        let frames = decoded.stdout.len() / frame_bytes;
+        assert!((2..=6).contains(&frames), "{frames} frames");
     }
 }
