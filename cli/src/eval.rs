@@ -70,7 +70,7 @@ fn run_episodes(args: &EvalArgs, task: Task, her: &HerConfig, policy: &Policy) -
             let latent = &latent;
             scope.spawn(move || {
                 let work = || -> Result<()> {
-                    let mut env = sim::her::make(&her, task, args.policy.seed)?;
+                    let mut env = sim::her::make(her, task, args.policy.seed)?;
                     let mut actor = policy.actor(args.policy.seed)?;
                     actor.load(&policy.snapshot)?;
                     actor.set_fixed_latent(latent)?;

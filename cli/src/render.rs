@@ -313,6 +313,12 @@ mod tests {
     fn renders_a_policy_to_an_mp4_with_ffmpeg() {
         if let Err(e) = Command::new(FFMPEG).arg("-version").stdout(Stdio::null()).status() {
             // Written past the test harness's capture, so that a run without ffmpeg shows it.
+            // CI installs ffmpeg (deploy/setup.sh) and says so: there, a skip would hide the path.
+            assert_ne!(
+                std::env::var("SACLSP_REQUIRE_FFMPEG").as_deref(),
+                Ok("1"),
+                "SACLSP_REQUIRE_FFMPEG=1 but ffmpeg is not found ({e})"
+            );
             let _ = writeln!(std::io::stderr(), "skipped: ffmpeg not found ({e}); the .mp4 path is untested");
             return;
         }

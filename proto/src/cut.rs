@@ -45,7 +45,9 @@ mod tests {
 
     #[test]
     fn cuts_round_trip() {
-        let cut = ReplayCut { lockstep: Some(CutState { learner_step: 500, cuts: true, progress: vec![1250, 1250] }) };
+        let cut = ReplayCut {
+            lockstep: Some(CutState { learner_step: 500, cuts: true, progress: vec![1250, 1250] }),
+        };
         assert_eq!(crate::decode::<ReplayCut>(&crate::encode(&cut)), Ok(cut));
         let normal = ReplayCut { lockstep: None };
         assert_eq!(crate::decode::<ReplayCut>(&crate::encode(&normal)), Ok(normal));

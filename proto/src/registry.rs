@@ -193,7 +193,8 @@ impl Entry {
 
 /// The docs' key table: a Markdown table, one row per entry.
 pub fn markdown_table() -> String {
-    let mut out = String::from("| key under `rl/<run>/` | message | written by | read by |\n|---|---|---|---|\n");
+    let mut out =
+        String::from("| key under `rl/<run>/` | message | written by | read by |\n|---|---|---|---|\n");
     for e in TOPICS {
         let key = match e.kind {
             Kind::Queryable => format!("`{}` (queryable)", e.key),
@@ -248,7 +249,11 @@ pub fn access_control() -> AccessControl {
     };
     for role in [Role::Learner, Role::Executor, Role::Replay, Role::Param] {
         let writes = |kind: Kind| -> Vec<String> {
-            TOPICS.iter().filter(|e| e.kind == kind && e.writer == Writer::Role(role)).map(Entry::wildcard).collect()
+            TOPICS
+                .iter()
+                .filter(|e| e.kind == kind && e.writer == Writer::Role(role))
+                .map(Entry::wildcard)
+                .collect()
         };
         let name = role.as_str();
         let published = writes(Kind::Publication);
@@ -327,7 +332,8 @@ mod tests {
         };
         for topic in topics {
             let key = topic.key(&run);
-            let families: Vec<&str> = TOPICS.iter().filter(|e| matches(&e.wildcard(), &key)).map(|e| e.key).collect();
+            let families: Vec<&str> =
+                TOPICS.iter().filter(|e| matches(&e.wildcard(), &key)).map(|e| e.key).collect();
             assert_eq!(families.len(), 1, "{key}: {families:?}");
         }
         assert_eq!(TOPICS.len(), 16, "one entry per family, none unused");

@@ -20,7 +20,8 @@ fn generated(path: &str, begin: &str, end: &str, want: &str) {
         return;
     }
     if std::env::var("SACLSP_BLESS").as_deref() == Ok("1") {
-        std::fs::write(&file, format!("{}{want}{}", &text[..body], &text[stop..])).unwrap();
+        std::fs::write(&file, format!("{}{want}{}", &text[..body], &text[stop..]))
+            .unwrap_or_else(|e| panic!("{path}: {e}"));
         return;
     }
     panic!(
@@ -32,7 +33,12 @@ fn generated(path: &str, begin: &str, end: &str, want: &str) {
 
 #[test]
 fn the_docs_key_table_is_the_registry() {
-    generated("docs/distributed.md", "<!-- topics:begin -->", "<!-- topics:end -->", &proto::registry::markdown_table());
+    generated(
+        "docs/distributed.md",
+        "<!-- topics:begin -->",
+        "<!-- topics:end -->",
+        &proto::registry::markdown_table(),
+    );
 }
 
 #[test]

@@ -71,11 +71,11 @@ use anyhow::{Context, anyhow};
 pub use config::{InitialPriority, MAX_REQUEST_DEADLINE_MS, MAX_TOP_K, MemoryPlan, ReplayServerConfig};
 pub use limiter::{Blocked, LimiterConfig, LimiterCounters, RateLimiter, Resumed};
 use node::{Bus, Shutdown};
-use run::RoleConfig;
 pub use pending::{Pending, Waiter};
 pub use rejects::{Input, Rejection, Rejects};
 use replay::ReplayBuffer;
 pub use replica::SnapshotLog;
+use run::RoleConfig;
 pub use scan::{CHUNK as SCAN_CHUNK_TRANSITIONS, PriorityDigest, PriorityScan};
 pub use service::{SampleOutcome, Service, ServiceCounters, Waiting};
 pub use snapshot::{

@@ -202,7 +202,11 @@ pub(crate) async fn state_loop(
 }
 
 /// Answers `replay/cut`: where a deterministic run resumes (`None` in normal mode).
-pub(crate) async fn cut_loop(ctx: Arc<Ctx>, queries: QueryQueue, mut shutdown: Shutdown) -> anyhow::Result<()> {
+pub(crate) async fn cut_loop(
+    ctx: Arc<Ctx>,
+    queries: QueryQueue,
+    mut shutdown: Shutdown,
+) -> anyhow::Result<()> {
     loop {
         let query = tokio::select! {
             biased;

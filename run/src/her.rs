@@ -168,7 +168,6 @@ impl HerConfig {
     pub fn goal_dim(&self, task: Task) -> usize {
         self.slice(task).map_or(0, |s| s.len())
     }
-
 }
 
 #[cfg(test)]
@@ -220,5 +219,4 @@ mod tests {
         assert_eq!(HerConfig::default().validate(Task::AntV5, 5), Ok(()));
         assert_eq!(HerConfig::default().dims(Task::AntV5), Task::AntV5.dims());
     }
-
 }

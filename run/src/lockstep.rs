@@ -23,9 +23,8 @@
 //! its episode (a truncation, as a time limit) and restarts its streams from a seed of the
 //! checkpoint step, so a resumed executor only needs the step ([`Lockstep::cut_seed`]).
 
-use serde::Deserialize;
 use crate::overrides::EXECUTORS_ENV;
-
+use serde::Deserialize;
 
 /// The `[lockstep]` table: deterministic mode's schedule (read only when `[train] deterministic`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -245,11 +244,7 @@ mod tests {
         assert_eq!((s.executors, s.warm_up_steps, s.updates_per_round), (2, 5000, 25));
         assert_eq!(s.checkpoint_every_updates, 100_000, "the learner's defaults: 100 epochs of 1000");
         let odd = format!("{on}[learner]\nepoch_length_updates = 110\ncheckpoint_every_epochs = 1\n");
-        assert!(
-            from_run_file(&odd).unwrap_err().contains("multiple of [lockstep] updates_per_round")
-        );
-        assert!(
-            from_run_file("[train]\ndeterministic = true\n[lockstep]\nexecutor = 2\n").is_err()
-        );
+        assert!(from_run_file(&odd).unwrap_err().contains("multiple of [lockstep] updates_per_round"));
+        assert!(from_run_file("[train]\ndeterministic = true\n[lockstep]\nexecutor = 2\n").is_err());
     }
 }

@@ -100,7 +100,8 @@ pub struct RunSpec {
 impl Default for RunSpec {
     /// Every table's defaults, no overrides.
     fn default() -> Self {
-        Self::parse_with("", &Overrides::default()).unwrap_or_else(|e| unreachable!("the defaults are valid: {e}"))
+        Self::parse_with("", &Overrides::default())
+            .unwrap_or_else(|e| unreachable!("the defaults are valid: {e}"))
     }
 }
 
@@ -146,7 +147,16 @@ impl RunSpec {
         her.slice(task)?;
         let hierarchy: HierarchyKeys = crate::table::table(&document, "hierarchy")?;
         let lockstep = Lockstep::from_document(&document, train.deterministic, overrides.executors()?)?;
-        Ok(RunSpec { path: None, train, task, her, hierarchy, lockstep, overrides: overrides.clone(), document })
+        Ok(RunSpec {
+            path: None,
+            train,
+            task,
+            her,
+            hierarchy,
+            lockstep,
+            overrides: overrides.clone(),
+            document,
+        })
     }
 
     /// The widths the networks and the replay see: the task's observation (with HER, the goal
@@ -166,7 +176,11 @@ impl RunSpec {
     }
 
     /// Table `name` over `base` instead of `T::default()` (see [`crate::table::table_over`]).
-    pub fn table_over<T: serde::Serialize + DeserializeOwned>(&self, name: &str, base: &T) -> Result<T, String> {
+    pub fn table_over<T: serde::Serialize + DeserializeOwned>(
+        &self,
+        name: &str,
+        base: &T,
+    ) -> Result<T, String> {
         crate::table::table_over(&self.document, name, base)
     }
 }
@@ -229,7 +243,11 @@ mod tests {
     fn bad_tables_are_named() {
         assert!(spec("[train]\ntask = \"ant-v9\"\n").unwrap_err().contains("[train] task"));
         assert!(spec("[her]\ngoal = \"speeed\"\n").unwrap_err().starts_with("[her]"));
-        assert!(spec("[train]\ntask = \"ant-v5\"\n[her]\ngoal = \"position\"\n").unwrap_err().contains("ant-v5-xy"));
+        assert!(
+            spec("[train]\ntask = \"ant-v5\"\n[her]\ngoal = \"position\"\n")
+                .unwrap_err()
+                .contains("ant-v5-xy")
+        );
         assert!(spec("[hierarchy]\nlevel = []\n").unwrap_err().starts_with("[hierarchy]"));
         assert!(spec("[replay_server.buffer]\ncapacity = 3\n").unwrap_err().contains("is now [replay]"));
         assert!(spec("not toml").is_err());

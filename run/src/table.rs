@@ -9,7 +9,9 @@ use serde::de::DeserializeOwned;
 /// the table.
 pub fn table<T: DeserializeOwned + Default>(document: &toml::Table, name: &str) -> Result<T, String> {
     match document.get(name) {
-        Some(value) => value.clone().try_into().map_err(|e: toml::de::Error| format!("[{name}] {}", e.message())),
+        Some(value) => {
+            value.clone().try_into().map_err(|e: toml::de::Error| format!("[{name}] {}", e.message()))
+        }
         None => Ok(T::default()),
     }
 }

@@ -1,7 +1,6 @@
 use std::fmt;
 use std::str::FromStr;
 
-
 /// A task's observation and action widths.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Dims {
@@ -54,7 +53,6 @@ impl Task {
         };
         Dims { obs_dim, act_dim }
     }
-
 }
 
 impl fmt::Display for Task {

@@ -32,8 +32,8 @@ mod spec;
 mod task;
 
 pub use error::EnvError;
-pub use spec::{EnvSpec, InitState, RewardTerms, Step};
 pub use run::{Dims, Task};
+pub use spec::{EnvSpec, InitState, RewardTerms, Step};
 pub use task::make;
 
 /// One simulated task, stepped by one thread. Resets are deterministic given the seed.

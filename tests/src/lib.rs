@@ -21,8 +21,8 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow, bail};
 use node::{Bus, BusConfig, Faults, Shutdown, ShutdownTrigger};
-use run::RoleConfig;
 use proto::{GlobalStep, LearnerStep, Message, NodeId, Role, RunId, topics};
+use run::RoleConfig;
 use tokio::task::JoinHandle;
 
 /// The longest any single wait of the harness may take.

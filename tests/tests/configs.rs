@@ -41,7 +41,10 @@ fn with_frozen_levels_every_role_trains_the_level_above_settings() -> anyhow::Re
         assert!(!agent.squash && !agent.embedding_output_relu, "{agent:?}");
         assert_eq!(agent.scale_reward, 3.0);
     }
-    assert_eq!((learner.run.hierarchy.depth(), executor.run.hierarchy.depth(), param.hierarchy.depth()), (1, 1, 1));
+    assert_eq!(
+        (learner.run.hierarchy.depth(), executor.run.hierarchy.depth(), param.hierarchy.depth()),
+        (1, 1, 1)
+    );
     // A key the table sets wins over the level-above default.
     let scaled = text.replace("scale_reward = 3.0", "scale_reward = 7.0");
     assert_eq!(role_config::<learner::LearnerConfig>(&scaled)?.agent.scale_reward, 7.0);

@@ -18,6 +18,6 @@ mod env;
 mod relabel;
 
 pub use config::{hindsight, make};
-pub use run::{GoalKind, GoalReward, HerConfig};
 pub use env::{GoalEnv, GoalStatus};
 pub use relabel::{Hindsight, Relabelled};
+pub use run::{GoalKind, GoalReward, HerConfig};
