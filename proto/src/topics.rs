@@ -390,6 +390,32 @@ pub fn liveliness_all(run: &RunId) -> String {
     format!("{}/liveliness/**", prefix(run))
 }
 
+/// One topic of every family (the stats and liveliness ones for every role), for tests.
+#[cfg(test)]
+pub(crate) fn examples() -> Vec<Topic> {
+    let mut topics = vec![
+        Topic::Experience { executor_id: 0 },
+        Topic::ReplaySample,
+        Topic::ReplayPriorities,
+        Topic::ReplayDurable,
+        Topic::ReplayState,
+        Topic::ReplayCut,
+        Topic::ParamsWeights,
+        Topic::ParamsPublish,
+        Topic::ParamsFrozen,
+        Topic::ControlStep,
+        Topic::ControlLearner,
+        Topic::Evaluation,
+        Topic::ControlBarrier { executor_id: 12 },
+        Topic::Episodes { executor_id: 5 },
+    ];
+    for role in Role::ALL {
+        topics.push(Topic::Stats(NodeId { role, id: 1 }));
+        topics.push(Topic::Liveliness(NodeId { role, id: 0 }));
+    }
+    topics
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -469,27 +495,8 @@ mod tests {
     #[test]
     fn parse_inverts_key_for_every_topic() {
         let r = run();
-        let mut topics = vec![
-            Topic::Experience { executor_id: 0 },
-            Topic::Experience { executor_id: u32::MAX },
-            Topic::ReplaySample,
-            Topic::ReplayPriorities,
-            Topic::ReplayDurable,
-            Topic::ReplayState,
-            Topic::ReplayCut,
-            Topic::ParamsWeights,
-            Topic::ParamsPublish,
-            Topic::ParamsFrozen,
-            Topic::ControlStep,
-            Topic::ControlLearner,
-            Topic::Evaluation,
-            Topic::ControlBarrier { executor_id: 12 },
-            Topic::Episodes { executor_id: 5 },
-        ];
-        for role in Role::ALL {
-            topics.push(Topic::Stats(NodeId { role, id: 1 }));
-            topics.push(Topic::Liveliness(NodeId { role, id: 0 }));
-        }
+        let mut topics = examples();
+        topics.push(Topic::Experience { executor_id: u32::MAX });
         for topic in topics {
             assert_eq!(Topic::parse(&r, &topic.key(&r)), Ok(topic));
         }

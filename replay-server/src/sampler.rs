@@ -1,6 +1,6 @@
 //! The query side: `replay/sample` (serve, or hold until inserts lift the block or the deadline
-//! passes, then refuse with a reason and a retry hint; never a silent hang) and `replay/state`
-//! (stats plus the top-k priorities, on demand).
+//! passes, then refuse with a reason and a retry hint; never a silent hang), `replay/state`
+//! (stats plus the top-k priorities, on demand) and `replay/cut` (deterministic mode's newest cut).
 //!
 //! Replies are `express`: without it zenoh's batching timer adds about a millisecond to a ~115 KB
 //! reply, which would cap a synchronous learner below 1,000 batches/s. A query's final message goes
@@ -155,11 +155,11 @@ async fn refuse(query: &Query, request_id: u64, reason: RefusalReason, retry_aft
     reply(query, &SampleReply::Refused(SampleRefusal { request_id, reason, retry_after_ms })).await;
 }
 
-async fn reply(query: &Query, message: &SampleReply) {
-    let bytes = proto::encode(message);
-    if let Err(e) = query.reply(query.key_expr().clone(), bytes).express(true).await {
-        // The learner may have timed out or gone; nothing to undo.
-        tracing::debug!(error = %e, request_id = message.request_id(), "could not send a sample reply");
+/// Sends `message` as `query`'s reply. A querier that timed out or went away is only logged:
+/// nothing to undo.
+async fn reply<M: proto::Message>(query: &Query, message: &M) {
+    if let Err(e) = query.reply(query.key_expr().clone(), proto::encode(message)).express(true).await {
+        tracing::debug!(error = %e, kind = %M::KIND, "could not send a reply");
     }
 }
 
@@ -168,15 +168,7 @@ pub(crate) async fn state_loop(
     queries: QueryQueue,
     mut shutdown: Shutdown,
 ) -> anyhow::Result<()> {
-    loop {
-        let query = tokio::select! {
-            biased;
-            _ = shutdown.wait() => break,
-            received = queries.recv() => match received {
-                Ok(query) => query,
-                Err(_) => break,
-            },
-        };
+    while let Some(query) = next_query(&queries, &mut shutdown).await {
         let k = query
             .parameters()
             .get("k")
@@ -193,10 +185,7 @@ pub(crate) async fn state_loop(
             report.push_metric(format!("replay/top.{rank}.slot"), entry.id.slot as f64);
             report.push_metric(format!("replay/top.{rank}.generation"), entry.id.generation as f64);
         }
-        let bytes = proto::encode(&report);
-        if let Err(e) = query.reply(query.key_expr().clone(), bytes).express(true).await {
-            tracing::debug!(error = %e, "could not send a state reply");
-        }
+        reply(&query, &report).await;
     }
     Ok(())
 }
@@ -207,28 +196,24 @@ pub(crate) async fn cut_loop(
     queries: QueryQueue,
     mut shutdown: Shutdown,
 ) -> anyhow::Result<()> {
-    loop {
-        let query = tokio::select! {
-            biased;
-            _ = shutdown.wait() => break,
-            received = queries.recv() => match received {
-                Ok(query) => query,
-                Err(_) => break,
-            },
+    while let Some(query) = next_query(&queries, &mut shutdown).await {
+        let cut = proto::ReplayCut {
+            lockstep: ctx.lock().lockstep().map(|l| proto::CutState {
+                learner_step: l.last_cut(),
+                cuts: l.cuts(),
+                progress: l.progress().to_vec(),
+            }),
         };
-        let reply = {
-            let service = ctx.service.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-            proto::ReplayCut {
-                lockstep: service.lockstep().map(|l| proto::CutState {
-                    learner_step: l.last_cut(),
-                    cuts: l.cuts(),
-                    progress: l.progress().to_vec(),
-                }),
-            }
-        };
-        if let Err(e) = query.reply(query.key_expr().clone(), proto::encode(&reply)).express(true).await {
-            tracing::debug!(error = %e, "could not send a cut reply");
-        }
+        reply(&query, &cut).await;
     }
     Ok(())
+}
+
+/// The next query, or `None` once shutdown fires or the queryable closes.
+async fn next_query(queries: &QueryQueue, shutdown: &mut Shutdown) -> Option<Query> {
+    tokio::select! {
+        biased;
+        _ = shutdown.wait() => None,
+        received = queries.recv() => received.ok(),
+    }
 }
