@@ -2,13 +2,14 @@
 # Fetch MuJoCo 3.17.0's shared library from PyPI's `mujoco==3.17.0` wheel into third_party/mujoco/
 # (git-ignored). mujoco-rs links it through MUJOCO_DYNAMIC_LINK_DIR (.cargo/config.toml) and every
 # binary finds it at run time through an rpath (build.rs), so nobody sets LD_LIBRARY_PATH.
-# Also ffmpeg, which `sac-lsp render` encodes .mp4 videos with (a .gif needs nothing) and without which
-# their test skips: installed once with apt-get when run as root where there is one (CI), else a note.
-# Idempotent: returns at once when the library and ffmpeg are already there.
+# With --tests (deploy/test.sh), also ffmpeg, which `sac-lsp render` encodes .mp4 videos with (a .gif
+# needs nothing) and without which their test skips: installed once with apt-get when run as root
+# where there is one (CI), else a note. Training and the other scripts install nothing but MuJoCo.
+# Idempotent: returns at once when the library (and with --tests, ffmpeg) is already there.
 set -euo pipefail
 
 # Quiet: one line while it installs, apt's output only when it fails; never fails the set-up.
-if ! command -v ffmpeg >/dev/null 2>&1; then
+if [[ ${1:-} == --tests ]] && ! command -v ffmpeg >/dev/null 2>&1; then
     if [[ $(id -u) == 0 ]] && command -v apt-get >/dev/null 2>&1; then
         echo "setup: installing ffmpeg (apt-get) for sac-lsp render's .mp4 videos" >&2
         apt_log="$(mktemp)"
