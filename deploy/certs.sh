@@ -75,7 +75,7 @@ rules='
       { id: "executor-publishes", permission: "deny", flows: ["ingress"], messages: ["put", "delete"], key_exprs: ["rl/*/experience/*", "rl/*/control/barrier/*", "rl/*/episodes/*"] },
       { id: "replay-publishes", permission: "deny", flows: ["ingress"], messages: ["put", "delete"], key_exprs: ["rl/*/replay/durable"] },
       { id: "replay-serves", permission: "deny", flows: ["ingress"], messages: ["declare_queryable", "reply"], key_exprs: ["rl/*/replay/sample", "rl/*/replay/state", "rl/*/replay/cut"] },
-      { id: "param-publishes", permission: "deny", flows: ["ingress"], messages: ["put", "delete"], key_exprs: ["rl/*/control/step"] },
+      { id: "param-publishes", permission: "deny", flows: ["ingress"], messages: ["put", "delete"], key_exprs: ["rl/*/params/stream", "rl/*/control/step"] },
       { id: "param-serves", permission: "deny", flows: ["ingress"], messages: ["declare_queryable", "reply"], key_exprs: ["rl/*/params/weights", "rl/*/params/frozen"] },
       { id: "monitor-listens", permission: "deny", flows: ["ingress"], messages: ["put", "delete", "declare_queryable", "reply", "liveliness_token"], key_exprs: ["**"] },
       { id: "own-learner", permission: "deny", flows: ["ingress"], messages: ["put", "delete", "liveliness_token"], key_exprs: ["rl/*/stats/learner/*", "rl/*/liveliness/learner/*"] },

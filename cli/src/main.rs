@@ -1,7 +1,8 @@
 //! `sac-lsp`: the command-line front of the project: `rollout` (checking the environments against
 //! other implementations), `train` (single-machine training), `monitor` (a live view and JSONL record
 //! of a distributed run's topics), `plot` (PNG learning curves from that record), `eval` (a
-//! checkpoint's returns) and `render` (a video of a checkpoint's policy).
+//! checkpoint's returns), `render` (a video of a checkpoint's policy) and `router` (a zenoh router for a
+//! host of a multi-host run).
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -15,6 +16,7 @@ mod policy;
 mod progress;
 mod render;
 mod rollout;
+mod router;
 mod tensorboard;
 mod train;
 
@@ -40,6 +42,8 @@ enum Command {
     Eval(eval::EvalArgs),
     /// Draw a checkpoint's policy acting: a GIF (or MP4) video and a PNG still, headless.
     Render(render::RenderArgs),
+    /// A zenoh router for a host of a multi-host run: its executors connect to it as clients.
+    Router(router::RouterArgs),
 }
 
 fn main() -> Result<()> {
@@ -56,5 +60,6 @@ fn main() -> Result<()> {
         Command::Plot(args) => plot::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Render(args) => render::run(&args),
+        Command::Router(args) => router::run(&args),
     }
 }

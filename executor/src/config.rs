@@ -20,6 +20,12 @@ pub struct ExecutorSettings {
     pub wait_deadline_ms: u64,
     /// How long one weights query may take before it is retried. Default 2000.
     pub weights_timeout_ms: u64,
+    /// Take new weights from the param server's push (`params/stream`), which each host's zenoh
+    /// router fans out, asking the param server only for what no push brought within
+    /// `weights::PUSH_GRACE` of its announcement. `false`: ask for every version (the param
+    /// server then sends one copy per executor; `deploy/scale.sh` runs both). Deterministic mode
+    /// always asks, for exact versions. Default true.
+    pub weights_push: bool,
     /// Cut episodes at this many steps when shorter than the task's limit (tests, quick runs).
     /// Default none: the task's own limit (1000 for the Ants).
     pub max_episode_steps: Option<u32>,
@@ -48,6 +54,7 @@ impl Default for ExecutorSettings {
             report_interval_ms: 100,
             wait_deadline_ms: 2000,
             weights_timeout_ms: 2000,
+            weights_push: true,
             max_episode_steps: None,
             stats_interval_ms: 1000,
             spool_dir: None,

@@ -8,7 +8,8 @@
 //! | key                         | direction | message                                              |
 //! |-----------------------------|-----------|------------------------------------------------------|
 //! | `control/step`              | in        | `GlobalStep`: the barrier and the newest weights version |
-//! | `params/weights` (get)      | query     | `WeightsSnapshot`, fetched only when the version changes |
+//! | `params/stream`             | in        | `WeightsSnapshot`: every new version, pushed once     |
+//! | `params/weights` (get)      | query     | `WeightsSnapshot`, when joining or a push did not come |
 //! | `params/frozen` (get)       | query     | `FrozenLevels`, once at start in a hierarchy         |
 //! | `experience/<id>`           | out       | `ExperienceBatch` with initial priorities |δ|          |
 //! | `episodes/<id>`             | out       | `EpisodeReport` per finished episode                 |
@@ -26,7 +27,8 @@
 //! | `rollout.rs` | [`Rollout`]: env + actor + pending batch, sans-IO                         |
 //! | `inbox.rs`   | [`Inbox`]: newest step and weights, shell → thread                        |
 //! | `worker.rs`  | the rollout thread: barrier, waits with reasons, loading weights          |
-//! | `weights.rs` | the weights fetch task: a `get` whenever a newer version is announced     |
+//! | `weights.rs` | the weights task: pushed versions, a `get` for what no push brought       |
+//! | `push.rs`    | `PushTracker`: which pushed frame to take, when to ask, sans-IO           |
 //! | `frozen.rs`  | a hierarchy's frozen levels, fetched once and checked against their hash  |
 //! | `spool.rs`   | [`Spool`]: published batches on disk until durable (`[executor] spool_dir`) |
 //! | `stats.rs`   | the stats report                                                          |
@@ -38,6 +40,7 @@
 mod config;
 mod frozen;
 mod inbox;
+mod push;
 mod rollout;
 mod spool;
 mod stats;
@@ -55,6 +58,7 @@ use proto::{DurableMarks, GlobalStep, Topic};
 pub use rollout::{Rollout, StepOutcome};
 pub use spool::{Ledger, LedgerEntry, MadeMark, Released, Spool, SpoolCounts, read_ledger};
 use tokio::sync::{mpsc, watch};
+pub use weights::{PUSH_GRACE, WeightsTaken};
 pub use worker::{Out, Progress, Wait, WorkerReport};
 use zenoh::sample::SampleKind;
 
@@ -65,8 +69,8 @@ pub struct Report {
     pub uptime_s: f64,
     /// The rollout thread's report.
     pub worker: WorkerReport,
-    /// Weight snapshots fetched.
-    pub weights_fetched: u64,
+    /// Weight versions taken, by how they came.
+    pub weights: WeightsTaken,
     /// Experience batches published.
     pub batches_published: u64,
     /// Rejected inputs by reason.
@@ -173,6 +177,12 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
     // Current tokens are delivered at declaration: a replay server already up counts as appearing,
     // so what earlier runs of this executor left in the spool is sent at once.
     let replay_sub = bus.watch(proto::Role::Replay).await?;
+    // Deterministic mode asks for exact versions; otherwise new ones come by push.
+    let pushed = if config.executor.weights_push && config.run.lockstep.is_none() {
+        Some(bus.subscribe(Topic::ParamsStream, weights::PUSH_QUEUE).await?)
+    } else {
+        None
+    };
     let _alive = bus.announce().await?;
     tracing::info!(seed, task = %config.run.task, spool = spool.is_some(), "executor up");
 
@@ -201,6 +211,7 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
         bus: bus.clone(),
         announced: announced_rx,
         exact,
+        pushed,
         inbox: inbox.clone(),
         timeout: Duration::from_millis(config.executor.weights_timeout_ms),
         stack: stack_hash,
@@ -262,7 +273,7 @@ pub async fn run(config: ExecutorConfig, bus: Bus, mut shutdown: Shutdown) -> an
         Err(_) => anyhow::bail!("the rollout thread panicked"),
     };
     drop(announced_tx); // ends the fetch task if shutdown has not
-    report.weights_fetched = fetcher.await?;
+    report.weights = fetcher.await?;
     report.uptime_s = started.elapsed().as_secs_f64();
     report.rejected = lock(&rejects).counts().clone();
     report.spool = spool.as_ref().map(Spool::counts);

@@ -7,6 +7,7 @@
 //! | key                          | direction | message                                                 |
 //! |------------------------------|-----------|---------------------------------------------------------|
 //! | `params/publish`             | in        | `WeightsSnapshot` from the learner                      |
+//! | `params/stream`              | out       | each accepted `WeightsSnapshot`, once                   |
 //! | `params/weights` (queryable) | out       | the latest `WeightsSnapshot` (error reply before one exists) |
 //! | `params/frozen` (queryable)  | out       | `FrozenLevels`: a hierarchy's frozen levels, from `[hierarchy]` |
 //! | `control/learner`            | in        | `LearnerStep`: the learner's progress                   |
@@ -26,8 +27,12 @@
 //! | `step_guard.rs` | [`StepGuard`]: refuses learner steps that jump implausibly far        |
 //! | `config.rs`     | [`ParamServerConfig`] (`[param_server]`)                              |
 //!
-//! Executors fetch weights only when an announcement names a newer version than theirs, so a
-//! late joiner gets the current weights at once and nobody polls.
+//! Every accepted version is pushed once on `params/stream`: with executors as clients of their
+//! host's zenoh router, one copy crosses to each host whatever the number of executors there, so the
+//! param server's outgoing bytes do not grow with them (`deploy/scale.sh` measures it). Executors
+//! ask the queryable only for what a push cannot give: the current weights when they join, a version
+//! whose push did not come (dropped under congestion, a partition), an exact version in
+//! deterministic mode. Nobody polls.
 #![deny(missing_docs)]
 
 mod barrier;
@@ -81,6 +86,9 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
     let frozen_queryable = bus.queryable(Topic::ParamsFrozen, queue).await?;
     let frozen = frozen_levels(&config.hierarchy)?;
     let step_pub = bus.publisher(Topic::ControlStep, Delivery::Express).await?;
+    // Dropped rather than blocking under congestion: one slow or cut-off host must not stall the
+    // barrier, and an executor that misses a push asks for the version instead.
+    let stream_pub = bus.publisher(Topic::ParamsStream, Delivery::Express).await?;
     // Declared last: seeing the token means every input above is in place.
     let _alive = bus.announce().await?;
     tracing::info!(rule = ?config.rule(), "param-server up");
@@ -113,6 +121,12 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
                     // The received frame is exactly what the queryable serves: keep it, no re-encode.
                     if let Some(version) = state.latest_version() {
                         held.take(version, sample.payload().clone());
+                        // Before the announcement below, so the push is on its way when executors
+                        // learn of the version.
+                        match stream_pub.put(sample.payload().clone()).await {
+                            Ok(()) => state.pushed(sample.payload().len()),
+                            Err(error) => tracing::debug!(%error, "weights push failed"),
+                        }
                     }
                 }
                 accepted
@@ -133,14 +147,14 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
                 _ => false,
             },
             Ok(query) = queryable.recv() => {
-                let reply = match held.serve(query.parameters().get(topics::WEIGHTS_VERSION_PARAMETER)) {
-                    Ok(bytes) => query.reply(&weights_key, bytes.clone()).express(true).await,
-                    Err(why) => query.reply_err(why).await,
+                let (reply, bytes) = match held.serve(query.parameters().get(topics::WEIGHTS_VERSION_PARAMETER)) {
+                    Ok(frame) => (query.reply(&weights_key, frame.clone()).express(true).await, frame.len()),
+                    Err(why) => (query.reply_err(why).await, 0),
                 };
                 if let Err(error) = reply {
                     tracing::debug!(%error, "weights reply failed");
                 }
-                state.served();
+                state.served(bytes);
                 false
             }
             Ok(query) = frozen_queryable.recv() => {
@@ -180,7 +194,16 @@ pub async fn run(config: ParamServerConfig, bus: Bus, mut shutdown: Shutdown) ->
         counts: state.counts(),
         rejected: state.rejects().counts().clone(),
     };
-    drop((publish_sub, learner_sub, barrier_sub, live_sub, queryable, frozen_queryable, step_pub));
+    drop((
+        publish_sub,
+        learner_sub,
+        barrier_sub,
+        live_sub,
+        queryable,
+        frozen_queryable,
+        step_pub,
+        stream_pub,
+    ));
     bus.close().await?;
     Ok(report)
 }

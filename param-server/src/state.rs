@@ -21,6 +21,12 @@ pub struct StateCounts {
     pub snapshots_repeated: u64,
     /// Weight queries answered (with weights or an error).
     pub weights_served: u64,
+    /// Bytes of weights sent in those answers.
+    pub weights_served_bytes: u64,
+    /// Weight versions pushed on `params/stream` (each once, whatever the number of executors).
+    pub weights_pushed: u64,
+    /// Bytes of weights pushed.
+    pub weights_pushed_bytes: u64,
     /// Learner progress messages received.
     pub learner_steps: u64,
     /// Barrier reports received.
@@ -223,9 +229,16 @@ impl State {
         true
     }
 
-    /// One weights query answered.
-    pub fn served(&mut self) {
+    /// One weights query answered, with `bytes` of weights (0 for an error).
+    pub fn served(&mut self, bytes: usize) {
         self.counts.weights_served += 1;
+        self.counts.weights_served_bytes += bytes as u64;
+    }
+
+    /// One weights version of `bytes` pushed on `params/stream`.
+    pub fn pushed(&mut self, bytes: usize) {
+        self.counts.weights_pushed += 1;
+        self.counts.weights_pushed_bytes += bytes as u64;
     }
 
     /// What `control/step` says now.
@@ -257,6 +270,9 @@ impl State {
         r.push_metric("param/snapshots_accepted", c.snapshots_accepted as f64);
         r.push_metric("param/snapshots_repeated", c.snapshots_repeated as f64);
         r.push_metric("param/weights_served", c.weights_served as f64);
+        r.push_metric("param/weights_served_bytes", c.weights_served_bytes as f64);
+        r.push_metric("param/weights_pushed", c.weights_pushed as f64);
+        r.push_metric("param/weights_pushed_bytes", c.weights_pushed_bytes as f64);
         r.push_metric("param/executors_left", c.executors_left as f64);
         r.push_metric("param/refills", c.refills as f64);
         if let Some(since) = self.starvation.starved_since(Instant::now()) {

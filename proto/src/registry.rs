@@ -101,12 +101,20 @@ pub const TOPICS: &[Entry] = &[
         readers: "param server",
     },
     Entry {
+        key: "params/stream",
+        kind: Kind::Publication,
+        message: "`WeightsSnapshot` (each version once)",
+        writer: Writer::Role(Role::Param),
+        querier: None,
+        readers: "executors (through their host's router)",
+    },
+    Entry {
         key: "params/weights",
         kind: Kind::Queryable,
         message: "`WeightsSnapshot` (`?version=V`)",
         writer: Writer::Role(Role::Param),
         querier: None,
-        readers: "executors query when `control/step` names a newer version",
+        readers: "executors query when they hold none, or `control/step` names a newer version whose push has not come",
     },
     Entry {
         key: "params/frozen",

@@ -136,6 +136,9 @@ pub enum Topic {
     ParamsWeights,
     /// `params/publish`: [`crate::WeightsSnapshot`], learner → param server.
     ParamsPublish,
+    /// `params/stream`: [`crate::WeightsSnapshot`], param server → executors: every accepted version,
+    /// published once (the zenoh routers fan it out to each host's executors).
+    ParamsStream,
     /// `params/frozen`: queryable; the param server replies with [`crate::FrozenLevels`].
     ParamsFrozen,
     /// `control/step`: [`crate::GlobalStep`] announcements.
@@ -172,6 +175,7 @@ impl Topic {
             Topic::ReplayCut => "replay/cut".to_string(),
             Topic::ParamsWeights => "params/weights".to_string(),
             Topic::ParamsPublish => "params/publish".to_string(),
+            Topic::ParamsStream => "params/stream".to_string(),
             Topic::ParamsFrozen => "params/frozen".to_string(),
             Topic::ControlStep => "control/step".to_string(),
             Topic::ControlLearner => "control/learner".to_string(),
@@ -198,6 +202,7 @@ impl Topic {
             ["replay", "cut"] => Topic::ReplayCut,
             ["params", "weights"] => Topic::ParamsWeights,
             ["params", "publish"] => Topic::ParamsPublish,
+            ["params", "stream"] => Topic::ParamsStream,
             ["params", "frozen"] => Topic::ParamsFrozen,
             ["control", "step"] => Topic::ControlStep,
             ["control", "learner"] => Topic::ControlLearner,
@@ -402,6 +407,7 @@ pub(crate) fn examples() -> Vec<Topic> {
         Topic::ReplayCut,
         Topic::ParamsWeights,
         Topic::ParamsPublish,
+        Topic::ParamsStream,
         Topic::ParamsFrozen,
         Topic::ControlStep,
         Topic::ControlLearner,

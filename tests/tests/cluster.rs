@@ -57,8 +57,11 @@ async fn roles_train_together_and_survive_a_dead_executor() -> anyhow::Result<()
     assert!(stopped.replay.counters.sampled_batches >= learner.updater.final_step);
     assert!(stopped.replay.counters.priorities_applied > 0, "priority updates reach the replay server");
     assert!(stopped.param.counts.executors_left >= 1);
+    // Each version is pushed once; executors ask only when joining (or for a push that is late).
+    assert!(stopped.param.counts.weights_pushed >= 2, "{:?}", stopped.param.counts);
     for (id, executor) in &stopped.executors {
         assert!(executor.worker.weights_loads >= 2, "executor {id} saw new weights: {executor:?}");
+        assert!(executor.weights.pushed >= 1, "executor {id} took pushed weights: {:?}", executor.weights);
         assert!(executor.worker.max_over_allowance <= 0, "executor {id} overstepped: {executor:?}");
         assert!(executor.batches_published > 0);
     }

@@ -26,6 +26,36 @@ async fn a_lost_weights_frame_is_sent_again() -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Every weights push of the param server is lost (a host whose router drops them): executors
+/// still take each newer version, by asking for it once its push is overdue.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn lost_weight_pushes_are_asked_for() -> anyhow::Result<()> {
+    let network = Network::default();
+    let param = network.of(Role::Param, 0);
+    param.cut(Direction::Out, |t| *t == Topic::ParamsStream);
+    let cluster = Cluster::start_with(Spec::tiny("faults-push", 2), network).await?;
+    let reports =
+        cluster.collect::<proto::BarrierReport>(&topics::control_barrier_all(cluster.run())).await?;
+    cluster.wait_for_learner_step(100).await?;
+    reports
+        .wait_until("both executors to act with weights newer than their first", |rs| {
+            (0..2).all(|id| {
+                let mine = || rs.iter().filter(|r| r.executor_id == id);
+                let first = mine().map(|r| r.weights_version).min();
+                mine().any(|r| Some(r.weights_version) > first)
+            })
+        })
+        .await?;
+    let stopped = within("the cluster to stop", Duration::from_secs(60), cluster.stop()).await??;
+    assert!(param.dropped() >= 1, "pushes were made and lost");
+    assert!(stopped.param.counts.weights_pushed >= 1, "{:?}", stopped.param.counts);
+    for (id, executor) in &stopped.executors {
+        assert_eq!(executor.weights.pushed, 0, "executor {id}: {:?}", executor.weights);
+        assert!(executor.weights.asked >= 2, "executor {id} asked for newer weights: {:?}", executor.weights);
+    }
+    Ok(())
+}
+
 /// Executor 1's barrier reports reach the param server late (300 ms), so after it dies its last
 /// reports arrive once its liveliness token is gone: they are counted as from an unknown executor and
 /// do not bring it back to life (a revived ghost would hold the barrier's shares).

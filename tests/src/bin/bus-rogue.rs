@@ -1,9 +1,10 @@
 //! `bus-rogue [bus options] --seconds S`: a peer that attacks a run, for the network-namespace test of
 //! authenticated runs. For S seconds it publishes what only other roles may publish (weights to the
-//! param server, a learner step of 2^62, experience, barrier reports, durable marks, a liveliness token
-//! of a ghost executor), asks the replay server for samples, and asks the param server for weights
-//! (what a monitor may do, so that a rogue holding a monitor's certificate shows it did reach the run),
-//! going on past S seconds until one weights reply has come or `--max-seconds` have passed.
+//! param server and as the param server's push, a learner step of 2^62, experience, barrier
+//! reports, durable marks, a liveliness token of a ghost executor), asks the replay server for
+//! samples, and asks the param server for weights (what a monitor may do, so that a rogue holding a
+//! monitor's certificate shows it did reach the run), going on past S seconds until one weights
+//! reply has come or `--max-seconds` have passed.
 //! At the end it prints one line: `bus-rogue: weights_replies=N sample_replies=M puts=K`.
 
 use std::time::{Duration, Instant};
@@ -43,8 +44,9 @@ async fn main() -> anyhow::Result<()> {
     let step = proto::encode(&LearnerStep { learner_step: 1 << 62, weights_version: FORGED, starved: true });
     let sample = proto::encode(&SampleRequest { request_id: 1, learner_step: FORGED, batch_size: 32 });
     let garbage = b"forged by bus-rogue".to_vec();
-    let puts: [(String, &Vec<u8>); 7] = [
+    let puts: [(String, &Vec<u8>); 8] = [
         (topics::params_publish(&run), &weights),
+        (proto::Topic::ParamsStream.key(&run), &weights),
         (topics::params_weights(&run), &weights),
         (topics::control_learner(&run), &step),
         (topics::experience(&run, 7), &garbage),
