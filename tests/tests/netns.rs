@@ -241,7 +241,7 @@ impl Finished {
         self.procs.iter().map(|(n, s, log)| format!("--- {n} ({s:?})\n{}", tail(log))).collect()
     }
 
-    /// Every process exited 0, the learner reached MAX_UPDATES, and both executors fetched weights
+    /// Every process exited 0, the learner reached MAX_UPDATES, and both executors took pushed weights
     /// and sent experience across the link.
     fn assert_trained(&self) {
         for (name, status, _) in &self.procs {
@@ -251,8 +251,10 @@ impl Finished {
         for id in 0..2 {
             let l = self.log(&format!("executor-{id}"));
             assert!(
-                field(l, "weights_fetched").is_some_and(|n| n >= 1),
-                "executor {id} got no weights\n{}",
+                // Its final report's `weights: WeightsTaken { asked, pushed }`: versions pushed to
+                // it across the link (executors that join before any weights exist ask for none).
+                field(l, "pushed").is_some_and(|n| n >= 1),
+                "executor {id} got no pushed weights\n{}",
                 self.dump()
             );
             assert!(
