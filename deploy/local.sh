@@ -36,6 +36,7 @@
 # only executors experience, and the monitor only listens (see README "Authenticated runs").
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
+source deploy/stop_pids.sh
 
 n=${1:-8}
 config=${2:-deploy/configs/ant-v5.toml}
@@ -150,18 +151,7 @@ report_parameters() {
 stopping=0
 stop_all() {
     stopping=1
-    local live=()
-    for pid in "${pids[@]}"; do kill -0 "$pid" 2>/dev/null && live+=("$pid"); done
-    [[ ${#live[@]} -gt 0 ]] || return 0
-    kill -TERM "${live[@]}" 2>/dev/null || true
-    for _ in $(seq 300); do
-        local any=0
-        for pid in "${live[@]}"; do kill -0 "$pid" 2>/dev/null && any=1; done
-        [[ $any == 0 ]] && return 0
-        sleep 0.1
-    done
-    echo "local.sh: some roles did not stop within 30 s; killing them" >&2
-    kill -KILL "${live[@]}" 2>/dev/null || true
+    stop_pids "local.sh: some roles" "${pids[@]}"
 }
 trap 'echo "local.sh: stopping $run_id" >&2; stop_all; exit 130' INT TERM
 

@@ -23,6 +23,7 @@
 #   BUILD=0    skip `cargo build`
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
+source deploy/stop_pids.sh
 
 [[ $(id -u) == 0 ]] || { echo "scale.sh: needs root (ip netns)" >&2; exit 2; }
 command -v ip >/dev/null || { echo "scale.sh: needs ip (iproute2)" >&2; exit 2; }
@@ -67,22 +68,8 @@ setup_net() {
 }
 
 pids=()
-stop_pids() { # pids...: TERM, then KILL whatever is left after 30 s
-    local live=()
-    for pid in "$@"; do kill -0 "$pid" 2>/dev/null && live+=("$pid"); done
-    [[ ${#live[@]} -gt 0 ]] || return 0
-    kill -TERM "${live[@]}" 2>/dev/null || true
-    for _ in $(seq 300); do
-        local any=0
-        for pid in "${live[@]}"; do kill -0 "$pid" 2>/dev/null && any=1; done
-        [[ $any == 0 ]] && return 0
-        sleep 0.1
-    done
-    echo "scale.sh: $(echo "${live[@]}") did not stop within 30 s; killing" >&2
-    kill -KILL "${live[@]}" 2>/dev/null || true
-}
 cleanup() {
-    stop_pids "${pids[@]}"
+    stop_pids "scale.sh: some processes" "${pids[@]}"
     teardown_net
 }
 trap 'cleanup; exit 130' INT TERM
@@ -156,14 +143,14 @@ if [[ $partition != only ]]; then
             start_cluster "scale-$tag-$name-$n-$mode-$delay" "$config" "$n" "$delay" "$dir"
             if ! python3 "$summary" wait-ready "$dir/monitor.jsonl" "$n" 180; then
                 echo "scale.sh: row $row did not get every executor up and the learner stepping within 180 s" >&2
-                stop_pids "${pids[@]}"
+                stop_pids "scale.sh: some processes" "${pids[@]}"
                 exit 1
             fi
             python3 "$summary" probe "$(ns A)" "v${tag}A" "$param_pid" "${exec_pids[@]}" >"$dir/probe0.json"
             sleep "$window"
             python3 "$summary" probe "$(ns A)" "v${tag}A" "$param_pid" "${exec_pids[@]}" >"$dir/probe1.json"
-            stop_pids "${exec_pids[@]}"
-            stop_pids "${pids[@]}"
+            stop_pids "scale.sh: some executors" "${exec_pids[@]}"
+            stop_pids "scale.sh: some processes" "${pids[@]}"
             python3 "$summary" row "$dir" "$name" "$n" "$mode" "$delay" | tee -a "$table"
         done
     done
@@ -192,8 +179,8 @@ if [[ $partition != 0 ]]; then
     healed=0
     python3 "$summary" wait-rejoined "$dir/monitor.jsonl" "$n" "$heal_ms" 120 && healed=1
     sleep 10
-    stop_pids "${exec_pids[@]}"
-    stop_pids "${pids[@]}"
+    stop_pids "scale.sh: some executors" "${exec_pids[@]}"
+    stop_pids "scale.sh: some processes" "${pids[@]}"
     audit_status=0
     "$bin/experience-audit" --config "$config" --snapshot "$dir/replay.snap" --spool "$dir/spool" \
         --executors "$n" >"$dir/audit.txt" 2>&1 || audit_status=$?
