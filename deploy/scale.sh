@@ -75,6 +75,16 @@ cleanup() {
 trap 'cleanup; exit 130' INT TERM
 trap cleanup EXIT
 
+# Waits (up to 30 s) until something listens on $2 (ADDRESS:PORT) in host $1's namespace.
+wait_listening() {
+    for _ in $(seq 300); do
+        ip netns exec "$(ns "$1")" ss -ltnH "sport = :${2##*:}" | grep -qF "$2" && return 0
+        sleep 0.1
+    done
+    echo "scale.sh: nothing listens on $2 on host $1 after 30 s; see the router's log" >&2
+    exit 1
+}
+
 # Starts a row's cluster: $1 run id, $2 run file, $3 executors, $4 one-way delay (ms), $5 directory.
 # Leaves the pids of the executors in exec_pids, of the param server in param_pid.
 start_cluster() {
@@ -99,6 +109,8 @@ start_cluster() {
     SACLSP_CHECKPOINT_DIR="$dir/checkpoints" on_host A learner "$bin/learner" "${common[@]}" "${peer[@]}"
     on_host A monitor "$bin/sac-lsp" monitor --run-id "$run_id" "${peer[@]}" --out "$dir/monitor.jsonl" --no-tensorboard --quiet \
         "${noshm[@]}"
+    # Executors are zenoh clients, which give up at once when their router is not listening yet.
+    for h in B C D; do wait_listening "$h" 127.0.0.1:7447; done
     exec_pids=()
     for i in $(seq 0 $((n - 1))); do
         local h=${hosts[$((1 + i % 3))]}
