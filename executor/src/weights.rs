@@ -2,9 +2,10 @@
 //! version once, fanned out by the zenoh routers); the param server's queryable (one `get`, retried
 //! every 500 ms while it fails) serves what no push brought: the weights a joiner starts from, and a
 //! version whose push has not come within [`PUSH_GRACE`] of its announcement (every version, when
-//! the push is off). Which to take and when to ask: [`crate::push::PushTracker`]. In deterministic mode it asks instead
-//! for the exact version the rollout thread says its next steps need (`params/weights?version=V`),
-//! once it is announced. What it takes goes straight into the rollout thread's inbox.
+//! the push is off). Which to take and when to ask: [`crate::push::PushTracker`]. In deterministic
+//! mode it asks instead for the exact version the rollout thread says its next steps need
+//! (`params/weights?version=V`), once it is announced. What it takes goes straight into the rollout
+//! thread's inbox.
 
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
