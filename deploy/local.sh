@@ -29,7 +29,8 @@
 # learner checkpoint into runs/<run-id>/replay.snap, so that the same RUN_ID resumes exactly from
 # the last checkpoint (README "Deterministic mode"); a run file with deterministic = true gets the
 # same. There a role that dies restarts the whole run from its last cut (one role cannot rejoin the
-# others off it). At the end local.sh prints the SHA-256 of the newest learner checkpoint either way.
+# others off it). At the end local.sh prints the SHA-256 of the newest learner checkpoint either way,
+# and where the best-evaluated weights are (runs/<run-id>/checkpoints/best-policy.safetensors).
 # AUTH=1: an authenticated run: deploy/certs.sh makes runs/<run-id>/auth/ (a CA of the run's own, a
 # certificate per role, and per role a zenoh config with mutual TLS and access control), every role
 # talks over tls/ endpoints with its role's certificate, and only the learner may publish weights,
@@ -140,12 +141,16 @@ launch() {
     esac
 }
 
-# The newest learner checkpoint and its SHA-256: two deterministic runs end with the same one.
+# The newest learner checkpoint and its SHA-256: two deterministic runs end with the same one. Then
+# the best-evaluated weights (learner/src/best.rs), which a long run's newest checkpoint may not be.
 report_parameters() {
-    local newest
+    local newest best="$dir/checkpoints/best-policy"
     newest=$(ls "$dir/checkpoints"/learner-*.safetensors 2>/dev/null | tail -n 1)
     [[ -n $newest ]] || return 0
     echo "local.sh: parameters $(sha256sum "$newest" | cut -d' ' -f1) in $newest" >&2
+    [[ -f $best.toml ]] || return 0
+    echo "local.sh: best policy in $best.safetensors, its evaluation:" \
+        "$(grep -E '^(learner_step|episodes|mean_return)' "$best.toml" | tr '\n' ' ')" >&2
 }
 
 stopping=0

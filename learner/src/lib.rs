@@ -1,7 +1,8 @@
 //! The learner: pulls prioritized batches from the replay server through a prefetch pipeline, runs
 //! SAC-LSP updates, sends back priorities, publishes weights to the param server every M updates
 //! and its step every few, evaluates once per epoch on a thread of its own, checkpoints every K
-//! epochs and resumes from the newest checkpoint. `run` is the whole role, so the binary and the
+//! epochs, keeps the best-evaluated weights beside the checkpoints and resumes from the newest
+//! checkpoint. `run` is the whole role, so the binary and the
 //! in-process test harness share it.
 //!
 //! # Keys (under `rl/<run>/`)
@@ -26,11 +27,13 @@
 //! | `updater.rs`    | [`Updater`]: the update thread                                  |
 //! | `evaluate.rs`   | [`evaluate`]: deterministic evaluation episodes                 |
 //! | `checkpoint.rs` | [`CheckpointDir`]: atomic checkpoint files, resume              |
+//! | `best.rs`       | [`BestPolicy`]: the best-evaluated weights so far               |
 //! | `outbox.rs`     | publishing; the newest weights are re-sent to a late param server |
 //! | `stats.rs`      | the stats report                                                |
 #![deny(missing_docs)]
 
 mod batch;
+mod best;
 mod checkpoint;
 mod config;
 mod evaluate;
@@ -45,6 +48,7 @@ use std::time::{Duration, Instant};
 
 use agent::{Actor, AnyLearner, ParamSnapshot, PolicyStack};
 pub use batch::Sampled;
+pub use best::BestPolicy;
 pub use checkpoint::CheckpointDir;
 pub use config::{LearnerConfig, LearnerSettings};
 pub use evaluate::{Episode, Evaluation, evaluate, prepare_latent, run_episode, run_episode_watched};
@@ -123,9 +127,10 @@ pub async fn run(config: LearnerConfig, bus: Bus, mut shutdown: Shutdown) -> any
             seed.wrapping_add(5),
         )?;
         let (out, episodes, mode) = (out_tx.clone(), s.eval_episodes, s.eval_mode);
+        let best = s.checkpoint_dir.as_deref().map(BestPolicy::open);
         std::thread::Builder::new()
             .name("evaluate".into())
-            .spawn(move || evaluation_thread(env, actor, (episodes, mode), rx, out))?;
+            .spawn(move || evaluation_thread(env, actor, (episodes, mode), best, rx, out))?;
         Some(tx)
     } else {
         None
@@ -318,11 +323,13 @@ fn check_resumed_stack(checkpoint: &agent::Checkpoint, frozen: &Frozen) -> anyho
     Ok(())
 }
 
-/// Evaluates each (epoch, weights) it receives and reports the result; ends when the sender does.
+/// Evaluates each (epoch, weights) it receives, keeps the best weights (with a checkpoint
+/// directory) and reports the result; ends when the sender does.
 fn evaluation_thread(
     mut env: Box<dyn sim::Environment>,
     mut actor: Actor,
     (episodes, mode): (u32, EvalMode),
+    mut best: Option<BestPolicy>,
     requests: std::sync::mpsc::Receiver<(u64, ParamSnapshot)>,
     out: mpsc::Sender<Out>,
 ) {
@@ -355,6 +362,11 @@ fn evaluation_thread(
                     mode,
                     goal_success: e.goal_success,
                 };
+                match best.as_mut().map(|best| best.offer(&report, &snapshot)) {
+                    Some(Ok(true)) => tracing::info!(learner_step, mean_return, "new best policy"),
+                    Some(Err(error)) => tracing::error!(%error, "best policy not written"),
+                    Some(Ok(false)) | None => {}
+                }
                 if out.blocking_send(Out::Eval(report)).is_err() {
                     return;
                 }

@@ -1,6 +1,7 @@
 //! `sac-lsp train`: single-machine SAC-LSP (the dissertation's "SAC-LSP" and "Prioritized SAC-LSP"
 //! runs) on any task, with per-epoch metrics (`metrics.csv` and TensorBoard events under
-//! `tensorboard/`) and periodic checkpoints.
+//! `tensorboard/`), periodic checkpoints and the best-evaluated weights
+//! (`checkpoints/best-policy.safetensors`, [`learner::BestPolicy`]).
 
 mod config;
 mod record;
@@ -90,6 +91,8 @@ pub fn run(args: &TrainArgs) -> Result<()> {
 
     let started = Instant::now();
     let (epochs, checkpoint_every) = (config.train.epochs, config.train.checkpoint_every_epochs);
+    let (eval_episodes, eval_mode) = (config.train.eval_episodes, config.train.eval_mode);
+    let mut best = learner::BestPolicy::open(&out.join("checkpoints"));
     let mut trainer = Trainer::new(config)?;
     let mut progress = Progress::new("epochs", epochs);
     for epoch in 0..epochs {
@@ -98,6 +101,19 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         metrics.append(&record)?;
         board.write(unix_s(), record.env_steps, &record.scalars())?;
         board.flush()?;
+        let evaluation = proto::EvalReport {
+            epoch,
+            learner_step: record.updates,
+            episodes: eval_episodes,
+            mean_return: record.eval_return,
+            mean_length: record.eval_length,
+            std_return: record.eval_std,
+            mode: eval_mode,
+            goal_success: None,
+        };
+        if best.beats(&evaluation) {
+            best.offer(&evaluation, &trainer.learner().snapshot()?).context("writing the best policy")?;
+        }
         tracing::info!(
             epoch,
             env_steps = record.env_steps,

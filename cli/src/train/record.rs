@@ -24,6 +24,8 @@ pub struct EpochRecord {
     pub eval_return: f64,
     /// Mean length of those episodes.
     pub eval_length: f64,
+    /// Standard deviation of their returns (for `best-policy.toml`; not a `metrics.csv` column).
+    pub eval_std: f64,
     /// Mean return of the training episodes that ended this epoch (NaN if none did).
     pub train_return: f64,
     /// Updates per second during this epoch.

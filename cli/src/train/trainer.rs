@@ -86,7 +86,6 @@ impl Trainer {
     }
 
     /// The learner.
-    #[cfg(test)]
     pub fn learner(&self) -> &AnyLearner {
         &self.learner
     }
@@ -130,6 +129,7 @@ impl Trainer {
             wall_s: self.started.elapsed().as_secs_f64(),
             eval_return: evaluation.mean_return,
             eval_length: evaluation.mean_length,
+            eval_std: evaluation.std_return,
             train_return: mean(&finished_returns),
             updates_per_s: (self.updates - updates_before) as f64 / seconds,
             env_steps_per_s: (env_steps - steps_before) as f64 / seconds,
