@@ -311,15 +311,23 @@ fn run_cluster(ns: &Namespaces, dir: &Path, transport: Transport, rogues: Vec<Ro
         );
     }
     let rogue_exe = env!("CARGO_BIN_EXE_bus-rogue");
-    let rogue_listen = transport.endpoint("10.213.1.3:0");
     let mut rogue_procs = Vec::new();
     for rogue in &rogues {
-        // Listening on TLS only: on zenoh's default (plain TCP on every address) the param server's
-        // gossip-driven connect to it could win over its own TLS connect, leaving one link without a
-        // certificate, on which the access control denies everything (the rogue then never reached
-        // the param server, and the test showed nothing).
-        let mut args: Vec<&str> =
-            vec!["--run-id", "netns", "--connect", &hub, "--connect", &param, "--listen", &rogue_listen];
+        // Listening nowhere (zenoh's peer default is plain TCP on every address): the rogue's own
+        // connects are its only links. Where it listened, the param server's gossip-driven connect to
+        // it raced the rogue's own: on plain TCP that link carried no certificate and the access
+        // control denied everything on it; on TLS the rogue still, rarely (once in CI), never heard
+        // the param server's queryable in 60 s.
+        let mut args: Vec<&str> = vec![
+            "--run-id",
+            "netns",
+            "--connect",
+            &hub,
+            "--connect",
+            &param,
+            "--zenoh-cfg",
+            "listen/endpoints:[]",
+        ];
         args.extend(rogue.args.iter().map(String::as_str));
         let c = ns.c.as_deref().expect("rogues need namespace C");
         rogue_procs.push(Proc::start(c, rogue_exe, rogue.name, &args, dir));
