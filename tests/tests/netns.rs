@@ -97,7 +97,8 @@ impl Proc {
         let child = Command::new("ip")
             .args(["netns", "exec", ns, exe])
             .args(args)
-            .env("RUST_LOG", "info")
+            // SACLSP_NETNS_LOG (e.g. "info,zenoh_transport=debug") to look into a failure.
+            .env("RUST_LOG", std::env::var("SACLSP_NETNS_LOG").unwrap_or_else(|_| "info".into()))
             .stdout(file.try_clone().expect("log file"))
             .stderr(file)
             .spawn()
@@ -299,8 +300,13 @@ fn run_cluster(ns: &Namespaces, dir: &Path, transport: Transport, rogues: Vec<Ro
         transport.endpoint(&format!("{HUB_IP}:0")),
         transport.endpoint("10.213.0.2:0"),
     );
+    // Each peer starts once the endpoints it connects to listen: an executor whose first connect is
+    // refused retries a second later, and by then the learner may have made its 200 updates, so it
+    // took no pushed weights (seen 2 times in 11 runs with debug logging).
     start(&ns.a, "replay", "replay", &["--listen", &hub]);
+    wait_listening(&ns.a, HUB_IP, 7447);
     start(&ns.a, "param", "param", &["--connect", &hub, "--listen", &param]);
+    wait_listening(&ns.a, HUB_IP, 7448);
     start(&ns.a, "learner", "learner", &["--connect", &hub, "--listen", &a_any]);
     for id in ["0", "1"] {
         start(
@@ -344,6 +350,24 @@ fn run_cluster(ns: &Namespaces, dir: &Path, transport: Transport, rogues: Vec<Ro
         finished.push((p.name.clone(), status, p.log_text()));
     }
     Finished { procs: finished }
+}
+
+/// Waits until `ip:port` accepts TCP connections from inside namespace `ns`; panics after 30 s.
+fn wait_listening(ns: &str, ip: &str, port: u16) {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let probe = format!("exec 3<>/dev/tcp/{ip}/{port}");
+    loop {
+        let accepted = Command::new("ip")
+            .args(["netns", "exec", ns, "bash", "-c", &probe])
+            .stderr(std::process::Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success());
+        if accepted {
+            return;
+        }
+        assert!(Instant::now() < deadline, "nothing listened on {ip}:{port} in namespace {ns} within 30 s");
+        std::thread::sleep(Duration::from_millis(50));
+    }
 }
 
 fn tail(log: &str) -> String {
