@@ -4,11 +4,11 @@
 //! own reward, also with HER) and, with HER, the goal success rate.
 
 use agent::{Actor, Mode};
-use proto::EvalMode;
+use proto::{EvalMode, EvalReport};
 use sim::Environment;
 
 /// The outcome of one evaluation.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Evaluation {
     /// Mean undiscounted return.
     pub mean_return: f64,
@@ -32,6 +32,21 @@ impl Evaluation {
         let goal_success =
             reached.filter(|r| !r.is_empty()).map(|r| r.iter().filter(|x| **x).count() as f64 / n);
         Self { mean_return, std_return: variance.sqrt(), mean_length, goal_success }
+    }
+
+    /// This evaluation as reported on the bus and kept with the best policy: `episodes` episodes in
+    /// `mode`, after `epoch`, of the weights at `learner_step`.
+    pub fn report(&self, epoch: u64, learner_step: u64, episodes: u32, mode: EvalMode) -> EvalReport {
+        EvalReport {
+            epoch,
+            learner_step,
+            episodes,
+            mean_return: self.mean_return,
+            mean_length: self.mean_length,
+            std_return: self.std_return,
+            mode,
+            goal_success: self.goal_success,
+        }
     }
 }
 

@@ -352,16 +352,7 @@ fn evaluation_thread(
                     goal_success = e.goal_success,
                     "evaluation"
                 );
-                let report = EvalReport {
-                    epoch,
-                    learner_step,
-                    episodes,
-                    mean_return: e.mean_return,
-                    mean_length: e.mean_length,
-                    std_return: e.std_return,
-                    mode,
-                    goal_success: e.goal_success,
-                };
+                let report = e.report(epoch, learner_step, episodes, mode);
                 match best.as_mut().map(|best| best.offer(&report, &snapshot)) {
                     Some(Ok(true)) => tracing::info!(learner_step, mean_return, "new best policy"),
                     Some(Err(error)) => tracing::error!(%error, "best policy not written"),

@@ -21,6 +21,9 @@ use std::time::{Duration, Instant};
 
 const MAX_UPDATES: u64 = 200;
 const HUB_IP: &str = "10.213.0.1";
+/// The replay server's port (the hub every peer connects to) and the param server's.
+const HUB_PORT: u16 = 7447;
+const PARAM_PORT: u16 = 7448;
 
 struct Namespaces {
     a: String,
@@ -284,7 +287,7 @@ fn run_cluster(ns: &Namespaces, dir: &Path, transport: Transport, rogues: Vec<Ro
     )
     .expect("write the run file");
     let config = config.to_str().expect("a UTF-8 temp path");
-    let hub = transport.endpoint(&format!("{HUB_IP}:7447"));
+    let hub = transport.endpoint(&format!("{HUB_IP}:{HUB_PORT}"));
     let node = env!("CARGO_BIN_EXE_cluster-node");
     let mut procs = Vec::new();
     let mut start = |ns: &str, name: &str, role: &str, extra: &[&str]| {
@@ -296,7 +299,7 @@ fn run_cluster(ns: &Namespaces, dir: &Path, transport: Transport, rogues: Vec<Ro
     };
     // The param server listens on a known port too, so that a rogue can reach it directly.
     let (param, a_any, b_any) = (
-        transport.endpoint(&format!("{HUB_IP}:7448")),
+        transport.endpoint(&format!("{HUB_IP}:{PARAM_PORT}")),
         transport.endpoint(&format!("{HUB_IP}:0")),
         transport.endpoint("10.213.0.2:0"),
     );
@@ -304,9 +307,9 @@ fn run_cluster(ns: &Namespaces, dir: &Path, transport: Transport, rogues: Vec<Ro
     // refused retries a second later, and by then the learner may have made its 200 updates, so it
     // took no pushed weights (seen 2 times in 11 runs with debug logging).
     start(&ns.a, "replay", "replay", &["--listen", &hub]);
-    wait_listening(&ns.a, HUB_IP, 7447);
+    wait_listening(&ns.a, HUB_IP, HUB_PORT);
     start(&ns.a, "param", "param", &["--connect", &hub, "--listen", &param]);
-    wait_listening(&ns.a, HUB_IP, 7448);
+    wait_listening(&ns.a, HUB_IP, PARAM_PORT);
     start(&ns.a, "learner", "learner", &["--connect", &hub, "--listen", &a_any]);
     for id in ["0", "1"] {
         start(

@@ -97,20 +97,11 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     let mut progress = Progress::new("epochs", epochs);
     for epoch in 0..epochs {
         let record = trainer.run_epoch()?;
-        progress.inc(&format!("eval return {:.1}", record.eval_return));
+        progress.inc(&format!("eval return {:.1}", record.evaluation.mean_return));
         metrics.append(&record)?;
         board.write(unix_s(), record.env_steps, &record.scalars())?;
         board.flush()?;
-        let evaluation = proto::EvalReport {
-            epoch,
-            learner_step: record.updates,
-            episodes: eval_episodes,
-            mean_return: record.eval_return,
-            mean_length: record.eval_length,
-            std_return: record.eval_std,
-            mode: eval_mode,
-            goal_success: None,
-        };
+        let evaluation = record.evaluation.report(epoch, record.updates, eval_episodes, eval_mode);
         if best.beats(&evaluation) {
             best.offer(&evaluation, &trainer.learner().snapshot()?).context("writing the best policy")?;
         }
@@ -118,7 +109,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             epoch,
             env_steps = record.env_steps,
             replay_size = trainer.replay().len(),
-            eval_return = format!("{:.1}", record.eval_return),
+            eval_return = format!("{:.1}", record.evaluation.mean_return),
             train_return = format!("{:.1}", record.train_return),
             updates_per_s = format!("{:.0}", record.updates_per_s),
             q_loss = format!("{:.3}", record.q_loss),

@@ -5,7 +5,7 @@ use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use learner::LossMeans;
+use learner::{Evaluation, LossMeans};
 
 use crate::tensorboard::Scalar;
 
@@ -20,12 +20,8 @@ pub struct EpochRecord {
     pub updates: u64,
     /// Seconds since the start.
     pub wall_s: f64,
-    /// Mean return of the deterministic evaluation episodes after this epoch.
-    pub eval_return: f64,
-    /// Mean length of those episodes.
-    pub eval_length: f64,
-    /// Standard deviation of their returns (for `best-policy.toml`; not a `metrics.csv` column).
-    pub eval_std: f64,
+    /// The evaluation after this epoch (`metrics.csv` has its mean return and length).
+    pub evaluation: Evaluation,
     /// Mean return of the training episodes that ended this epoch (NaN if none did).
     pub train_return: f64,
     /// Updates per second during this epoch.
@@ -74,8 +70,8 @@ impl MetricsFile {
             r.env_steps,
             r.updates,
             r.wall_s,
-            r.eval_return,
-            r.eval_length,
+            r.evaluation.mean_return,
+            r.evaluation.mean_length,
             r.train_return,
             r.updates_per_s,
             r.env_steps_per_s,
@@ -108,8 +104,8 @@ impl EpochRecord {
     /// distributed run's, so the two compare in one TensorBoard.
     pub fn scalars(&self) -> Vec<Scalar> {
         vec![
-            Scalar::new("eval/fixed_latent/return_mean", self.eval_return),
-            Scalar::new("eval/fixed_latent/length_mean", self.eval_length),
+            Scalar::new("eval/fixed_latent/return_mean", self.evaluation.mean_return),
+            Scalar::new("eval/fixed_latent/length_mean", self.evaluation.mean_length),
             Scalar::new("train/episode_return", self.train_return),
             Scalar::new("run/updates_per_s", self.updates_per_s),
             Scalar::new("run/env_steps_per_s", self.env_steps_per_s),

@@ -127,9 +127,7 @@ impl Trainer {
             env_steps,
             updates: self.updates,
             wall_s: self.started.elapsed().as_secs_f64(),
-            eval_return: evaluation.mean_return,
-            eval_length: evaluation.mean_length,
-            eval_std: evaluation.std_return,
+            evaluation,
             train_return: mean(&finished_returns),
             updates_per_s: (self.updates - updates_before) as f64 / seconds,
             env_steps_per_s: (env_steps - steps_before) as f64 / seconds,
@@ -248,7 +246,7 @@ mod tests {
         // Updates start once 100 transitions are stored: one per step from step 100 on.
         assert_eq!((first.updates, second.updates), (201, 501));
         assert_eq!(trainer.replay().len(), 600);
-        assert!(second.eval_return >= 1.0 && second.eval_length >= 1.0);
+        assert!(second.evaluation.mean_return >= 1.0 && second.evaluation.mean_length >= 1.0);
         assert!(second.q_loss.is_finite() && second.v_loss.is_finite() && second.policy_loss.is_finite());
         assert!(first.train_return.is_finite(), "random pendulum episodes end within an epoch");
         let checkpoint = trainer.learner().checkpoint().unwrap();
@@ -268,7 +266,7 @@ mod tests {
         // 300 online steps, and 4 copies of each step of the episodes that ended in the epoch.
         let relabelled = trainer.replay().counters().inserted_total - 300;
         assert!(relabelled > 0 && relabelled.is_multiple_of(4), "{relabelled} relabelled transitions");
-        assert!(record.eval_length >= 1.0 && record.q_loss.is_finite());
+        assert!(record.evaluation.mean_length >= 1.0 && record.q_loss.is_finite());
         // Relabelled n-step returns are not implemented: refused.
         let mut bad = tiny(SamplingMode::Uniform);
         bad.her = HerConfig { goal: GoalKind::Speed, ..HerConfig::default() };
@@ -355,7 +353,7 @@ mod tests {
         let mut high = Trainer::new(config.fitted().unwrap()).unwrap();
         let record = high.run_epoch().unwrap();
         assert_eq!(record.updates, 201);
-        assert!(record.eval_length >= 1.0 && record.q_loss.is_finite());
+        assert!(record.evaluation.mean_length >= 1.0 && record.q_loss.is_finite());
         let checkpoint = high.checkpoint().unwrap();
         let tensors =
             agent::ParamSnapshot { version: 0, safetensors: checkpoint.safetensors }.tensors().unwrap();
@@ -387,8 +385,8 @@ mod tests {
         let mut best = f64::MIN;
         for _ in 0..config.train.epochs {
             let record = trainer.run_epoch().unwrap();
-            best = best.max(record.eval_return);
-            if record.eval_return >= 1000.0 {
+            best = best.max(record.evaluation.mean_return);
+            if record.evaluation.mean_return >= 1000.0 {
                 return;
             }
         }
